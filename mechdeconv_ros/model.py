@@ -1,0 +1,686 @@
+# Copyright 2026 The mechdeconv_ros Authors.
+# SPDX-License-Identifier: Apache-2.0
+"""
+LensModel: from a physical lens description to raw intrinsics, a radial map and an equivalent D.
+
+The model (Lim & Furukawa 2008, with the distortion traced instead of approximated):
+
+1. The lens is a thick lens (two spherical surfaces, eq. 7-8) or a general prescription. Its
+   paraxial data give the focal length ``f``, the principal planes ``H``, ``H'`` and, for a scene
+   at distance ``l`` in front of ``H``, the image distance ``v = f l / (l - f)`` behind ``H'``
+   (``v = f`` for ``l = inf``). The sensor sits at that paraxial image plane.
+2. The raw camera is the pinhole that the paraxial lens is: ``f_x = v / p_x``, ``f_y = v / p_y``
+   (pixel pitches in mm), principal point at the image centre ``((W-1)/2, (H-1)/2)``.
+3. Distortion is radial (the paper's assumption 3). The exact chief ray of a scene point at
+   field ``tan(theta)`` (seen from ``H``) lands at the real height ``rho_real`` on the sensor,
+   where the pinhole puts it at ``rho_ideal = v tan(theta)``. Sampling gives the radial map
+   ``rho_real = R(rho_ideal)``; it ends where a ray fails (miss, TIR, vignetting) or ``R`` stops
+   increasing, and beyond that nothing is valid.
+4. The corrected image is a pinhole with camera matrix ``K_new = diag(k f_x, k f_y, 1)`` centred
+   on the output image; ``k`` interpolates between the zoom that keeps only valid pixels
+   (``alpha = 0``) and the one that keeps every source pixel (``alpha = 1``), as OpenCV's
+   getOptimalNewCameraMatrix does (but with one scale for both axes, so the pixel aspect is
+   kept).
+5. The equivalent calibration fits OpenCV/ROS radial coefficients to the traced curve in
+   normalised coordinates ``r_u = rho_ideal / v``, ``r_d = rho_real / v``:
+   plumb_bob ``r_d = r_u (1 + k1 r_u^2 + k2 r_u^4 + k3 r_u^6)``, or rational_polynomial
+   ``r_d (1 + k4 r_u^2 + k5 r_u^4 + k6 r_u^6) = r_u (1 + k1 r_u^2 + k2 r_u^4 + k3 r_u^6)``
+   when plumb_bob misses by more than 0.1 px RMS. Both are linear least squares.
+
+Pixel coordinates follow OpenCV and ROS (REP-103 optical frame): x right, y down, origin at the
+centre of the top-left pixel.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import math
+from typing import Any, Mapping
+
+import numpy as np
+import numpy.typing as npt
+import yaml
+
+from mechdeconv_ros import constraints
+from mechdeconv_ros.optics import biconvex_for_focal_length, propagate_sigma, thick_lens
+from mechdeconv_ros.params import (
+    check_values, INTERPOLATIONS, MAX_FRAME_PIXELS, ParamValue)
+from mechdeconv_ros.raytrace import (
+    image_plane, paraxial, Prescription, Surface, trace_chief_rays, vertex_z)
+
+FloatArray = npt.NDArray[np.float64]
+
+#: Samples of the radial map (DESIGN: at least 1024 from 0 to past the output corner).
+CURVE_SAMPLES = 2048
+#: Plumb_bob fits worse than this (px RMS) switch to rational_polynomial.
+PLUMB_BOB_MAX_RMS_PX = 0.1
+#: OpenCV interpolation flags by the names ``output.interpolation`` accepts.
+CV_INTERPOLATION = {'nearest': 0, 'linear': 1, 'cubic': 2, 'lanczos4': 4}
+assert tuple(CV_INTERPOLATION) == INTERPOLATIONS
+
+
+class ModelError(ValueError):
+    """
+    A parameter set that describes no usable camera.
+
+    ``parameter`` names the parameter at fault; ``str(err)`` starts with it and says why in
+    words a person understands.
+    """
+
+    def __init__(self, parameter: str, reason: str) -> None:
+        """
+        Create the error.
+
+        :param parameter: the parameter at fault, e.g. ``'scene.distance_mm'``.
+        :param reason: why, without the parameter name.
+        """
+        super().__init__(f'{parameter}: {reason}')
+        self.parameter = parameter
+        self.reason = reason
+
+
+@dataclass(frozen=True)
+class RadialMap:
+    """
+    The traced radial map ``rho_real = R(rho_ideal)`` on the sensor, in mm.
+
+    ``ideal_mm`` is uniformly spaced from 0; ``real_mm`` is strictly increasing. Beyond
+    ``ideal_mm[-1]`` (``valid_ideal_mm``) the field is not valid.
+    """
+
+    ideal_mm: FloatArray
+    real_mm: FloatArray
+
+    @property
+    def valid_ideal_mm(self) -> float:
+        """Return the largest valid ideal radius."""
+        return float(self.ideal_mm[-1])
+
+    @property
+    def valid_real_mm(self) -> float:
+        """Return the largest valid real radius."""
+        return float(self.real_mm[-1])
+
+    def real_from_ideal(self, ideal_mm: FloatArray) -> FloatArray:
+        """
+        Interpolate real radii; NaN beyond the valid field.
+
+        :param ideal_mm: ideal radii, mm, any shape.
+        :return: real radii, mm.
+        """
+        ideal_mm = np.asarray(ideal_mm, dtype=np.float64)
+        out = np.interp(ideal_mm, self.ideal_mm, self.real_mm)
+        return np.where(ideal_mm <= self.valid_ideal_mm, out, np.nan)
+
+    def ideal_from_real(self, real_mm: FloatArray) -> FloatArray:
+        """
+        Invert the map by interpolation (it is monotonic); NaN beyond the valid field.
+
+        :param real_mm: real radii, mm, any shape.
+        :return: ideal radii, mm.
+        """
+        real_mm = np.asarray(real_mm, dtype=np.float64)
+        out = np.interp(real_mm, self.real_mm, self.ideal_mm)
+        return np.where(real_mm <= self.valid_real_mm, out, np.nan)
+
+
+@dataclass(frozen=True)
+class LensModel:
+    """
+    Everything derived from one parameter set and one image size.
+
+    Build it with :func:`build_model`. Matrices are float64; ``K`` and ``D`` describe the raw
+    camera, ``K_new`` and ``P`` the corrected image.
+    """
+
+    values: dict[str, ParamValue]
+    prescription: Prescription
+    width: int
+    height: int
+    out_width: int
+    out_height: int
+    pixel_mm: tuple[float, float]
+    focal_length_mm: float
+    image_distance_mm: float
+    curve: RadialMap
+    K: FloatArray
+    K_new: FloatArray
+    D: tuple[float, ...]
+    distortion_model: str
+    fit_rms_px: float
+    max_displacement_px: float
+    interpolation: int
+    summary: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def P(self) -> FloatArray:  # noqa: N802 - the ROS CameraInfo field name
+        """Return the 3x4 projection matrix ``[K_new | 0]`` of the corrected image."""
+        return np.hstack([self.K_new, np.zeros((3, 1))])
+
+    def raw_from_rect(self, points_px: FloatArray) -> FloatArray:
+        """
+        Map corrected-image pixel coordinates to raw-image pixel coordinates.
+
+        :param points_px: ``(..., 2)`` x, y in the corrected image.
+        :return: ``(..., 2)`` x, y in the raw image; NaN outside the valid field.
+        """
+        points_px = np.asarray(points_px, dtype=np.float64)
+        xn = (points_px[..., 0] - self.K_new[0, 2]) / self.K_new[0, 0]
+        yn = (points_px[..., 1] - self.K_new[1, 2]) / self.K_new[1, 1]
+        scale = self._scale(np.hypot(xn, yn) * self.image_distance_mm)
+        return np.stack([self.K[0, 2] + self.K[0, 0] * xn * scale,
+                         self.K[1, 2] + self.K[1, 1] * yn * scale], axis=-1)
+
+    def rect_from_raw(self, points_px: FloatArray) -> FloatArray:
+        """
+        Map raw-image pixel coordinates to corrected-image pixel coordinates.
+
+        :param points_px: ``(..., 2)`` x, y in the raw image.
+        :return: ``(..., 2)`` x, y in the corrected image; NaN outside the valid field.
+        """
+        points_px = np.asarray(points_px, dtype=np.float64)
+        x_mm = (points_px[..., 0] - self.K[0, 2]) * self.pixel_mm[0]
+        y_mm = (points_px[..., 1] - self.K[1, 2]) * self.pixel_mm[1]
+        real = np.hypot(x_mm, y_mm)
+        ideal = self.curve.ideal_from_real(real)
+        with np.errstate(invalid='ignore', divide='ignore'):
+            ratio = np.where(real > 0.0, ideal / real, 1.0)
+        xn = x_mm * ratio / self.image_distance_mm
+        yn = y_mm * ratio / self.image_distance_mm
+        return np.stack([self.K_new[0, 2] + self.K_new[0, 0] * xn,
+                         self.K_new[1, 2] + self.K_new[1, 1] * yn], axis=-1)
+
+    def _scale(self, ideal_mm: FloatArray) -> FloatArray:
+        """Return ``rho_real / rho_ideal`` (1 on the axis); NaN outside the valid field."""
+        real = self.curve.real_from_ideal(ideal_mm)
+        with np.errstate(invalid='ignore', divide='ignore'):
+            return np.where(ideal_mm > 0.0, real / ideal_mm, 1.0)
+
+    def report(self) -> dict[str, Any]:
+        """
+        Return every derived quantity as a JSON-ready dict (infinite distances are ``None``).
+
+        :return: the summary with K, D, P and a subsampled distortion curve.
+        """
+        step = max(1, len(self.curve.ideal_mm) // 256)
+        out = dict(self.summary)
+        out.update({
+            'width_px': self.width, 'height_px': self.height,
+            'out_width_px': self.out_width, 'out_height_px': self.out_height,
+            'K': self.K.round(10).tolist(), 'D': list(self.D),
+            'distortion_model': self.distortion_model,
+            'K_new': self.K_new.round(10).tolist(), 'P': self.P.round(10).tolist(),
+            'fit_rms_px': self.fit_rms_px,
+            'max_displacement_px': self.max_displacement_px,
+            'distortion_curve': {
+                'ideal_height_mm': self.curve.ideal_mm[::step].tolist(),
+                'real_height_mm': self.curve.real_mm[::step].tolist(),
+            },
+        })
+        return out
+
+
+def radii_mean_error_percent(estimated_px: FloatArray, true_px: FloatArray,
+                             center_px: tuple[float, float]) -> float:
+    """
+    Return the paper's radii mean error (eq. 35-37), in percent.
+
+    For each point the radius from the principal point of the estimated (corrected) position is
+    compared with that of the true position: ``e = mean(|r_est - r_true| / r_true) * 100``.
+    Points on the axis (``r_true = 0``) carry no radius and are skipped.
+
+    :param estimated_px: ``(N, 2)`` estimated positions.
+    :param true_px: ``(N, 2)`` true positions.
+    :param center_px: the principal point both radii are measured from.
+    :return: the mean relative radius error in percent; NaN if no point qualifies.
+    """
+    center = np.asarray(center_px, dtype=np.float64)
+    r_est = np.hypot(*(np.asarray(estimated_px, dtype=np.float64) - center).T)
+    r_true = np.hypot(*(np.asarray(true_px, dtype=np.float64) - center).T)
+    keep = r_true > 1e-9
+    if not np.any(keep):
+        return math.nan
+    return float(np.mean(np.abs(r_est[keep] - r_true[keep]) / r_true[keep]) * 100.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# Building
+# ---------------------------------------------------------------------------------------------
+
+def _is_prescription_mode(values: Mapping[str, Any]) -> bool:
+    return len(values['lens.surfaces.radius_mm']) > 0
+
+
+def make_prescription(values: Mapping[str, Any]) -> Prescription:
+    """
+    Build the lens from the ``lens.*`` values.
+
+    :param values: checked parameter values.
+    :return: the thick lens (two surfaces, stop at ``z_H - m_a``) or the prescription.
+    :raises ModelError: when the description is not a lens that focuses.
+    """
+    if _is_prescription_mode(values):
+        return _surface_prescription(values)
+    n = float(values['lens.refractive_index'])
+    t = float(values['lens.thickness_mm'])
+    if n <= 1.0:
+        raise ModelError('lens.refractive_index',
+                         f'n = {n:g} is not glass: a lens needs an index above 1 (air)')
+    f_nominal = float(values['lens.focal_length_mm'])
+    r1, r2 = float(values['lens.r1_mm']), float(values['lens.r2_mm'])
+    if f_nominal > 0.0:
+        try:
+            radius = biconvex_for_focal_length(f_nominal, n, t)
+        except ValueError as err:
+            raise ModelError('lens.focal_length_mm', str(err)) from None
+        r1, r2 = radius, -radius
+    try:
+        return thick_lens(n, r1, r2, t, float(values['lens.stop_offset_mm']),
+                          float(values['lens.aperture_diameter_mm']))
+    except ValueError as err:
+        raise ModelError('lens.r1_mm', f'r1 = {r1:g} mm, r2 = {r2:g} mm, t = {t:g} mm: {err}'
+                         ) from None
+
+
+def _surface_prescription(values: Mapping[str, Any]) -> Prescription:
+    radii = list(values['lens.surfaces.radius_mm'])
+    count = len(radii)
+    arrays = {}
+    for name in ('thickness_mm', 'refractive_index', 'semi_diameter_mm'):
+        key = f'lens.surfaces.{name}'
+        array = list(values[key])
+        if name == 'semi_diameter_mm' and not array:
+            array = [0.0] * count
+        if len(array) != count:
+            raise ModelError(key, f'has {len(array)} values but lens.surfaces.radius_mm has '
+                                  f'{count}: give one per surface')
+        arrays[name] = array
+    stop = int(values['lens.stop_surface'])
+    if not 0 <= stop < count:
+        raise ModelError('lens.stop_surface',
+                         f'{stop} is not a surface index (the prescription has {count} '
+                         f'surfaces: 0 to {count - 1})')
+    if arrays['refractive_index'][-1] != 1.0:
+        raise ModelError('lens.surfaces.refractive_index',
+                         'the last surface must end in air (index 1.0): the sensor is in air')
+    surfaces = tuple(
+        Surface(float(r), float(t), float(n), float(s))
+        for r, t, n, s in zip(radii, arrays['thickness_mm'], arrays['refractive_index'],
+                              arrays['semi_diameter_mm']))
+    try:
+        probe = Prescription(surfaces, 0.0)
+        return Prescription(surfaces, float(vertex_z(probe)[stop]))
+    except ValueError as err:
+        raise ModelError('lens.surfaces.radius_mm', str(err)) from None
+
+
+def _scene_distance(values: Mapping[str, Any]) -> float:
+    distance = float(values['scene.distance_mm'])
+    return math.inf if distance == 0.0 else distance
+
+
+def _image_size(values: Mapping[str, Any], width: int, height: int) -> tuple[int, int, int, int]:
+    w = int(values['sensor.width_px']) or int(width)
+    h = int(values['sensor.height_px']) or int(height)
+    if w <= 0 or h <= 0:
+        raise ModelError('sensor.width_px',
+                         f'the image size {w}x{h} px is empty; set sensor.width_px and '
+                         'sensor.height_px or feed images')
+    ow = int(values['output.width_px']) or w
+    oh = int(values['output.height_px']) or h
+    for name, pixels in (('sensor.width_px', w * h), ('output.width_px', ow * oh)):
+        if pixels > MAX_FRAME_PIXELS:
+            raise ModelError(name, f'{pixels / 1e6:.0f} Mpx is more than the '
+                                   f'{MAX_FRAME_PIXELS / 1e6:.0f} Mpx a model may use '
+                                   '(memory bound of the maps)')
+    return w, h, ow, oh
+
+
+def _trace_curve(prescription: Prescription, distance: float, sensor_z: float, v: float,
+                 ideal_max_mm: float, samples: int) -> RadialMap:
+    """Trace ``samples`` chief rays from 0 to ``ideal_max_mm`` and keep the valid prefix."""
+    ideal = np.linspace(0.0, ideal_max_mm, samples)
+    real = -trace_chief_rays(prescription, distance, sensor_z, ideal / v)
+    good = np.isfinite(real)
+    good[1:] &= np.diff(real) > 0.0
+    # The valid field is the prefix up to the first failed ray or the first non-increase.
+    end = int(np.argmin(good)) if not good.all() else samples
+    return RadialMap(ideal[:end], real[:end])
+
+
+def _boundary_points(w: int, h: int, per_side: int = 64) -> FloatArray:
+    """Return points on the outer edges of a w x h pixel image (pixel-edge coordinates)."""
+    xs = np.linspace(-0.5, w - 0.5, per_side)
+    ys = np.linspace(-0.5, h - 0.5, per_side)
+    return np.concatenate([
+        np.stack([xs, np.full_like(xs, -0.5)], axis=1),
+        np.stack([xs, np.full_like(xs, h - 0.5)], axis=1),
+        np.stack([np.full_like(ys, -0.5), ys], axis=1),
+        np.stack([np.full_like(ys, w - 0.5), ys], axis=1),
+    ])
+
+
+def _fit_equivalent_d(curve: RadialMap, v: float, limit_ideal_mm: float,
+                      pixel_mm: float) -> tuple[tuple[float, ...], str, float]:
+    """Fit plumb_bob (or rational_polynomial) to the curve up to ``limit_ideal_mm``."""
+    keep = (curve.ideal_mm > 0.0) & (curve.ideal_mm <= limit_ideal_mm)
+    r_u = curve.ideal_mm[keep] / v
+    r_d = curve.real_mm[keep] / v
+    if r_u.size < 8:
+        return (0.0,) * 5, 'plumb_bob', 0.0
+    to_px = v / pixel_mm
+    r2 = r_u * r_u
+    powers = np.stack([r2, r2 * r2, r2 * r2 * r2], axis=1)
+    # plumb_bob: r_d - r_u = r_u (k1 r^2 + k2 r^4 + k3 r^6), residuals scaled to pixels.
+    a = r_u[:, None] * powers
+    k, *_ = np.linalg.lstsq(a * to_px, (r_d - r_u) * to_px, rcond=None)
+    rms = float(np.sqrt(np.mean(((a @ k) - (r_d - r_u)) ** 2)) * to_px)
+    plumb = (float(k[0]), float(k[1]), 0.0, 0.0, float(k[2]))
+    if rms <= PLUMB_BOB_MAX_RMS_PX:
+        return plumb, 'plumb_bob', rms
+    # rational: r_d - r_u = r_u (k1 r^2 + k2 r^4 + k3 r^6) - r_d (k4 r^2 + k5 r^4 + k6 r^6).
+    b = np.hstack([r_u[:, None] * powers, -r_d[:, None] * powers])
+    c, *_ = np.linalg.lstsq(b * to_px, (r_d - r_u) * to_px, rcond=None)
+    num = r_u * (1.0 + powers @ c[:3])
+    den = 1.0 + powers @ c[3:]
+    rational_rms = float(np.sqrt(np.mean((num / den - r_d) ** 2)) * to_px)
+    if not rational_rms < rms:
+        return plumb, 'plumb_bob', rms
+    return ((float(c[0]), float(c[1]), 0.0, 0.0, float(c[2]),
+             float(c[3]), float(c[4]), float(c[5])), 'rational_polynomial', rational_rms)
+
+
+def _scale_k(boundary_ideal: FloatArray, disk: float, half_w: float, half_h: float,
+             fx: float, fy: float, alpha: float) -> float:
+    """
+    Choose the zoom ``k`` of ``K_new`` from the raw image outline in ideal normalised coords.
+
+    ``alpha = 0``: the output shows only valid source pixels (inner rectangle of the outline,
+    and inside the valid disk); ``alpha = 1``: every source pixel is in view (outer rectangle).
+    """
+    x, y = boundary_ideal[:, 0], boundary_ideal[:, 1]
+    n = len(x) // 4
+    top, bottom, left, right = (slice(0, n), slice(n, 2 * n), slice(2 * n, 3 * n),
+                                slice(3 * n, 4 * n))
+    inner_x = min(-np.max(x[left]), np.min(x[right]))
+    inner_y = min(-np.max(y[top]), np.min(y[bottom]))
+    k0 = max(half_w / (fx * inner_x), half_h / (fy * inner_y),
+             math.hypot(half_w / fx, half_h / fy) / disk)
+    k1 = min(half_w / (fx * np.max(np.abs(x))), half_h / (fy * np.max(np.abs(y))))
+    return float(k0 * (1.0 - alpha) + k1 * alpha)
+
+
+def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0) -> LensModel:
+    """
+    Build the model of one parameter set for one image size.
+
+    :param values: parameter name -> value; missing names take their defaults.
+    :param width: the incoming image width, used when ``sensor.width_px`` is 0.
+    :param height: the incoming image height, used when ``sensor.height_px`` is 0.
+    :return: the model.
+    :raises ModelError: naming the parameter at fault when the values describe no camera.
+    """
+    try:
+        vals = check_values(values)
+    except ValueError as err:
+        name = str(err).split(':', 1)[0].split('[', 1)[0].strip(" '")
+        raise ModelError(name, str(err).split(':', 1)[-1].strip()) from None
+    prescription = make_prescription(vals)
+    try:
+        para = paraxial(prescription)
+    except ValueError as err:
+        raise ModelError(_lens_param(vals), str(err)) from None
+    f = para.efl_mm
+    if f <= 0.0:
+        raise ModelError(_lens_param(vals),
+                         f'the lens diverges (f = {f:.4g} mm): it forms no real image of the '
+                         'scene on a sensor')
+    distance = _scene_distance(vals)
+    if distance <= f:
+        raise ModelError('scene.distance_mm',
+                         f'{distance:g} mm is inside the focal length {f:.4g} mm: the lens '
+                         'forms no real image of it')
+    if math.isfinite(distance) and para.front_principal_z_mm - distance >= 0.0:
+        raise ModelError('scene.distance_mm',
+                         f'{distance:g} mm from the front principal plane puts the scene inside '
+                         'the lens')
+    try:
+        sensor_z, v = image_plane(prescription, distance)
+    except ValueError as err:
+        raise ModelError('scene.distance_mm', str(err)) from None
+    w, h, ow, oh = _image_size(vals, width, height)
+    px = float(vals['sensor.pixel_size_x_um']) * 1e-3
+    py = float(vals['sensor.pixel_size_y_um']) * 1e-3
+    fx, fy = v / px, v / py
+    K = np.array([[fx, 0.0, (w - 1) / 2.0], [0.0, fy, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
+
+    # Pass 1: trace far enough to cover the raw image (edge, not pixel centre) and find K_new.
+    edge_real = math.hypot(w / 2.0 * px, h / 2.0 * py)
+    ideal_max = 1.5 * edge_real
+    for _ in range(12):
+        coarse = _trace_curve(prescription, distance, sensor_z, v, ideal_max, 1024)
+        if coarse.ideal_mm.size < 1024 or coarse.valid_real_mm >= 1.05 * edge_real:
+            break
+        ideal_max *= 2.0
+    if coarse.ideal_mm.size < 16 or coarse.valid_real_mm < 0.05 * edge_real:
+        raise ModelError(_stop_param(vals),
+                         'no chief ray reaches the sensor beyond '
+                         f'{coarse.valid_real_mm:.3g} mm of the {edge_real:.3g} mm half-diagonal: '
+                         'the stop position or the lens blocks the field')
+    boundary = _boundary_points(w, h)
+    bx = (boundary[:, 0] - K[0, 2]) * px
+    by = (boundary[:, 1] - K[1, 2]) * py
+    b_real = np.hypot(bx, by)
+    b_ideal = coarse.ideal_from_real(np.minimum(b_real, coarse.valid_real_mm))
+    ratio = b_ideal / b_real / v
+    boundary_ideal = np.stack([bx * ratio, by * ratio], axis=1)
+    disk = coarse.valid_ideal_mm / v
+    k = _scale_k(boundary_ideal, disk, ow / 2.0, oh / 2.0, fx, fy, float(vals['output.alpha']))
+    K_new = np.array([[k * fx, 0.0, (ow - 1) / 2.0], [0.0, k * fy, (oh - 1) / 2.0],
+                      [0.0, 0.0, 1.0]])
+
+    # Pass 2: the dense curve from 0 to just past the output corner (and the raw image edge).
+    out_corner = math.hypot(ow / 2.0 / (k * fx), oh / 2.0 / (k * fy)) * v
+    raw_corner_ideal = float(np.nanmax(b_ideal))
+    reach = min(1.02 * max(out_corner, raw_corner_ideal), coarse.valid_ideal_mm * 1.001)
+    curve = _trace_curve(prescription, distance, sensor_z, v, reach, CURVE_SAMPLES)
+
+    D, dist_model, rms = _fit_equivalent_d(curve, v, raw_corner_ideal, min(px, py))
+    disp = (boundary_ideal * v - np.stack([bx, by], axis=1)) / np.array([px, py])
+    max_disp = float(np.nanmax(np.hypot(disp[:, 0], disp[:, 1])))
+
+    model = LensModel(
+        values=vals, prescription=prescription, width=w, height=h, out_width=ow,
+        out_height=oh, pixel_mm=(px, py), focal_length_mm=f, image_distance_mm=v, curve=curve,
+        K=K, K_new=K_new, D=D, distortion_model=dist_model, fit_rms_px=rms,
+        max_displacement_px=max_disp,
+        interpolation=CV_INTERPOLATION[str(vals['output.interpolation'])])
+    model.summary.update(_summary(model, vals, distance, edge_real))
+    return model
+
+
+def _lens_param(values: Mapping[str, Any]) -> str:
+    if _is_prescription_mode(values):
+        return 'lens.surfaces.radius_mm'
+    return 'lens.focal_length_mm' if float(values['lens.focal_length_mm']) > 0 else 'lens.r1_mm'
+
+
+def _stop_param(values: Mapping[str, Any]) -> str:
+    return 'lens.stop_surface' if _is_prescription_mode(values) else 'lens.stop_offset_mm'
+
+
+def _finite_or_none(value: float) -> float | None:
+    return value if math.isfinite(value) else None
+
+
+def _tolerance_keys(values: Mapping[str, Any]) -> tuple[dict[str, float], dict[str, float]]:
+    """Return the scalar lens quantities with their 1-sigma tolerances, for propagation."""
+    tol = {'r': float(values['lens.tolerance.r1_mm']),
+           't': float(values['lens.tolerance.thickness_mm']),
+           'n': float(values['lens.tolerance.refractive_index'])}
+    nominal: dict[str, float] = {}
+    sigmas: dict[str, float] = {}
+    if _is_prescription_mode(values):
+        # Every surface gets the tolerance class of the thick-lens parameters.
+        for kind, key, sigma in (('radius_mm', 'r', tol['r']), ('thickness_mm', 't', tol['t']),
+                                 ('refractive_index', 'n', tol['n'])):
+            for i, value in enumerate(values[f'lens.surfaces.{kind}']):
+                if kind == 'radius_mm' and value == 0.0:
+                    continue
+                if kind == 'refractive_index' and value == 1.0:
+                    continue
+                nominal[f'lens.surfaces.{kind}[{i}]'] = float(value)
+                sigmas[f'lens.surfaces.{kind}[{i}]'] = sigma
+    else:
+        for name, sigma_name in (('lens.r1_mm', 'lens.tolerance.r1_mm'),
+                                 ('lens.r2_mm', 'lens.tolerance.r2_mm'),
+                                 ('lens.thickness_mm', 'lens.tolerance.thickness_mm'),
+                                 ('lens.refractive_index', 'lens.tolerance.refractive_index')):
+            if name in ('lens.r1_mm', 'lens.r2_mm') and (
+                    float(values['lens.focal_length_mm']) > 0.0 or values[name] == 0.0):
+                continue
+            nominal[name] = float(values[name])
+            sigmas[name] = float(values[sigma_name])
+    return nominal, sigmas
+
+
+def _with(values: Mapping[str, Any], scalars: Mapping[str, float]) -> dict[str, Any]:
+    """Return a copy of ``values`` with scalar (and ``name[i]`` array element) overrides."""
+    out = {k: (list(v) if isinstance(v, list) else v) for k, v in values.items()}
+    for key, value in scalars.items():
+        if key.endswith(']'):
+            name, index = key[:-1].split('[')
+            out[name][int(index)] = value
+        else:
+            out[key] = value
+    return out
+
+
+def _summary(model: LensModel, vals: Mapping[str, Any], distance: float,
+             edge_real: float) -> dict[str, Any]:
+    """Derive the scene constraints (eq. 9-25) and the tolerance sigmas."""
+    f = model.focal_length_mm
+    nominal, sigmas = _tolerance_keys(vals)
+
+    def efl(p: Mapping[str, float]) -> float:
+        return paraxial(make_prescription(_with(vals, p))).efl_mm
+
+    sigma_f = propagate_sigma(efl, nominal, sigmas)
+    w_mm = constraints.sensor_size_mm(model.width, vals['sensor.pixel_size_x_um'])
+    h_mm = constraints.sensor_size_mm(model.height, vals['sensor.pixel_size_y_um'])
+    q = float(vals['lens.exposure_constant_q'])
+    d_a = float(vals['lens.aperture_diameter_mm'])
+    n_f = constraints.f_number(f, d_a, q)
+    c = constraints.circle_of_confusion_mm(f, float(vals['scene.circle_of_confusion_mm']))
+    h = constraints.hyperfocal_mm(f, n_f, c)
+    c_set = float(vals['scene.circle_of_confusion_mm'])
+
+    def hyper(p: Mapping[str, float]) -> float:
+        scal = dict(p)
+        f_p = efl({k: v for k, v in scal.items() if k != 'd_a'})
+        n_fp = constraints.f_number(f_p, scal['d_a'], q)
+        return constraints.hyperfocal_mm(f_p, n_fp, constraints.circle_of_confusion_mm(f_p,
+                                                                                      c_set))
+
+    sigma_h = propagate_sigma(hyper, {**nominal, 'd_a': d_a},
+                              {**sigmas, 'd_a': float(vals['lens.tolerance.aperture_diameter_mm'])})
+    focus = float(vals['scene.focus_distance_mm']) or distance
+    focus = math.inf if focus == 0.0 else focus
+    near, far = constraints.depth_of_field_mm(h, focus)
+    warnings = []
+    if not near <= distance <= far:
+        warnings.append(f'scene distance {distance:g} mm is outside the depth of field '
+                        f'[{near:.4g}, {far:.4g}] mm of the focus distance {focus:g} mm')
+    if model.curve.valid_real_mm < edge_real:
+        warnings.append(f'the valid field ends at {model.curve.valid_real_mm:.4g} mm, inside '
+                        f'the sensor half-diagonal {edge_real:.4g} mm: corners stay black')
+    corner_sigma = _corner_sigma_px(model, vals, nominal, sigmas, distance)
+    return {
+        'mode': 'prescription' if _is_prescription_mode(vals) else 'thick_lens',
+        'focal_length_mm': f,
+        'focal_length_sigma_mm': sigma_f,
+        'image_distance_mm': model.image_distance_mm,
+        'principal_planes_mm': {
+            'front': paraxial(model.prescription).front_principal_z_mm,
+            'rear': paraxial(model.prescription).rear_principal_z_mm},
+        'stop_z_mm': model.prescription.stop_z_mm,
+        'scene_distance_mm': _finite_or_none(distance),
+        'sensor_size_mm': {'x': w_mm, 'y': h_mm, 'diagonal': math.hypot(w_mm, h_mm)},
+        'fov_deg': {'horizontal': constraints.field_of_view_deg(w_mm, f),
+                    'vertical': constraints.field_of_view_deg(h_mm, f),
+                    'diagonal': constraints.field_of_view_deg(math.hypot(w_mm, h_mm), f)},
+        'footprint_mm': {'x': _finite_or_none(constraints.footprint_mm(distance, w_mm, f)),
+                         'y': _finite_or_none(constraints.footprint_mm(distance, h_mm, f))},
+        'feature_resolution_mm': {
+            'x': _finite_or_none(constraints.feature_resolution_mm(
+                distance, vals['sensor.pixel_size_x_um'], f)),
+            'y': _finite_or_none(constraints.feature_resolution_mm(
+                distance, vals['sensor.pixel_size_y_um'], f))},
+        'f_number': n_f,
+        'circle_of_confusion_mm': c,
+        'hyperfocal_mm': h,
+        'hyperfocal_sigma_mm': sigma_h,
+        'focus_distance_mm': _finite_or_none(focus),
+        'depth_of_field_mm': {'near': near, 'far': _finite_or_none(far)},
+        'valid_field_mm': model.curve.valid_real_mm,
+        'corner_sigma_px': corner_sigma,
+        'warnings': warnings,
+    }
+
+
+def _corner_sigma_px(model: LensModel, vals: Mapping[str, Any], nominal: Mapping[str, float],
+                     sigmas: Mapping[str, float], distance: float) -> float:
+    """
+    Propagate the lens tolerances to the raw image position of the corner scene point.
+
+    The scene point that the nominal model images at the raw image corner is traced through
+    each perturbed lens (refocused: the sensor at its own paraxial image plane); the spread of
+    its real image height, in pixels of the smaller pitch, is the correction's uncertainty there.
+    """
+    corner = np.array([[model.width - 1.0, model.height - 1.0]])
+    x_mm = (corner[0, 0] - model.K[0, 2]) * model.pixel_mm[0]
+    y_mm = (corner[0, 1] - model.K[1, 2]) * model.pixel_mm[1]
+    ideal = float(model.curve.ideal_from_real(np.array(math.hypot(x_mm, y_mm))))
+    if not math.isfinite(ideal):
+        return math.nan
+    tan_field = np.array([ideal / model.image_distance_mm])
+
+    def height(p: Mapping[str, float]) -> float:
+        lens = make_prescription(_with(vals, p))
+        z, _ = image_plane(lens, distance)
+        return float(-trace_chief_rays(lens, distance, z, tan_field)[0])
+
+    try:
+        sigma_mm = propagate_sigma(height, nominal, sigmas)
+    except (ValueError, ModelError):
+        return math.nan
+    return float(sigma_mm / min(model.pixel_mm))
+
+
+
+def camera_info_yaml(model: LensModel, camera_name: str = 'mechdeconv') -> str:
+    """
+    Write the raw camera as camera_calibration_parsers YAML (what camera_info_manager loads).
+
+    K and D describe the raw camera (D = the equivalent coefficients), R is the identity and
+    P = ``[K_new | 0]``: the same content the node publishes on ``camera_info``.
+
+    :param model: the lens model.
+    :param camera_name: the ``camera_name`` field.
+    :return: YAML text.
+    """
+    def matrix(rows: int, cols: int, data: Any) -> dict[str, Any]:
+        return {'rows': rows, 'cols': cols,
+                'data': [float(x) for x in np.asarray(data, dtype=np.float64).ravel()]}
+
+    document = {
+        'image_width': model.width,
+        'image_height': model.height,
+        'camera_name': camera_name,
+        'camera_matrix': matrix(3, 3, model.K),
+        'distortion_model': model.distortion_model,
+        'distortion_coefficients': matrix(1, len(model.D), model.D),
+        'rectification_matrix': matrix(3, 3, np.eye(3)),
+        'projection_matrix': matrix(3, 4, model.P),
+    }
+    return yaml.safe_dump(document, sort_keys=False, default_flow_style=None)

@@ -1,0 +1,340 @@
+# Copyright 2026 The mechdeconv_ros Authors.
+# SPDX-License-Identifier: Apache-2.0
+"""
+The one parameter schema of mechdeconv_ros.
+
+Every parameter the node declares, the CLI reads, the config YAML files hold and the README
+table lists is one :class:`ParamSpec` in :data:`SCHEMA`. Nothing here imports ROS: the node
+turns each spec into a ``ParameterDescriptor`` (``FloatingPointRange`` / ``IntegerRange``), and
+the core builds models from plain ``dict[str, value]`` mappings checked by
+:func:`check_values`.
+
+Units are in the names (``_mm``, ``_um``, ``_px``). Lengths are millimetres. Radii follow the
+optical sign convention: positive when the centre of curvature lies on the image side (+z),
+0 for a flat surface. Defaults reproduce Case 2 of Lim & Furukawa (2008), Table 1: a
+640x480 CMOS sensor behind a biconvex BK7 thick lens with the aperture stop 0.2 mm in front of
+the front principal plane, looking at a scene 1 m away.
+
+Ranges are the physical per-field bounds (rclpy enforces them, inclusive). Constraints between
+fields (an afocal lens, a scene inside the focal length, mismatched surface arrays) are the
+model's to check: see :func:`mechdeconv_ros.model.build_model`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+from pathlib import Path
+from typing import Any, Mapping, Sequence, Union
+
+import yaml
+
+ParamValue = Union[bool, int, float, str, list]
+
+#: Allowed values of ``output.interpolation`` and the OpenCV flag names they stand for.
+INTERPOLATIONS = ('nearest', 'linear', 'cubic', 'lanczos4')
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """
+    One parameter: name, type, default, unit, range and what it means.
+
+    ``type`` is one of ``'double'``, ``'integer'``, ``'string'``, ``'bool'`` and
+    ``'double_array'``. ``minimum``/``maximum`` are inclusive bounds (``None``: unbounded);
+    for arrays they bound every element.
+    """
+
+    name: str
+    type: str
+    default: ParamValue
+    unit: str
+    description: str
+    minimum: float | None = None
+    maximum: float | None = None
+    read_only: bool = False
+    choices: tuple[str, ...] = ()
+
+    @property
+    def group(self) -> str:
+        """Return the first dotted component of the name (lens, sensor, scene, output, node)."""
+        return self.name.split('.', 1)[0] if '.' in self.name else 'node'
+
+    @property
+    def is_model(self) -> bool:
+        """Return True when a change of this parameter changes the lens model or its maps."""
+        return self.group in ('lens', 'sensor', 'scene', 'output')
+
+
+def _d(name: str, default: float, unit: str, description: str,
+       minimum: float | None = None, maximum: float | None = None) -> ParamSpec:
+    return ParamSpec(name, 'double', float(default), unit, description, minimum, maximum)
+
+
+def _i(name: str, default: int, unit: str, description: str,
+       minimum: int | None = None, maximum: int | None = None) -> ParamSpec:
+    return ParamSpec(name, 'integer', int(default), unit, description, minimum, maximum)
+
+
+def _a(name: str, unit: str, description: str,
+       minimum: float | None = None, maximum: float | None = None) -> ParamSpec:
+    return ParamSpec(name, 'double_array', [], unit, description, minimum, maximum)
+
+
+#: Largest output (and input) frame the node accepts, in pixels: 8192 x 8192. The maps cost
+#: 6 bytes per output pixel (CV_16SC2 + CV_16UC1) plus 8 bytes of float maps while they are
+#: built, so this bounds a model at about 1 GiB transiently and 400 MiB held.
+MAX_FRAME_PIXELS = 8192 * 8192
+#: Largest width or height, in pixels, of an output or input frame.
+MAX_SIDE_PX = 16384
+
+SCHEMA: tuple[ParamSpec, ...] = (
+    # --- lens: the paper's thick lens (two spherical surfaces) ---
+    _d('lens.refractive_index', 1.5168, '1',
+       'Refractive index n of the lens glass (d-line); the paper uses BK7, 1.5168.', 1.0, 4.0),
+    _d('lens.r1_mm', 4.0, 'mm',
+       'Radius of the front surface; > 0 when its centre of curvature is on the image side, '
+       '0 = flat.', -1.0e4, 1.0e4),
+    _d('lens.r2_mm', -4.0, 'mm',
+       'Radius of the rear surface; a biconvex lens has r2 < 0, 0 = flat.', -1.0e4, 1.0e4),
+    _d('lens.thickness_mm', 3.0, 'mm', 'Centre thickness t of the lens.', 0.0, 1.0e3),
+    _d('lens.aperture_diameter_mm', 1.0, 'mm',
+       'Diameter d_a of the aperture stop (sets the f-number, eq. 16-18).', 1.0e-3, 1.0e3),
+    _d('lens.stop_offset_mm', 0.2, 'mm',
+       'Offset m_a of the aperture stop from the front principal plane; > 0 towards the '
+       'object (eq. 26-34). May put the stop inside the glass. Thick-lens mode only.',
+       -1.0e3, 1.0e3),
+    _d('lens.focal_length_mm', 0.0, 'mm',
+       'Nominal focal length (datasheet); > 0 replaces r1/r2 by a symmetric biconvex lens of '
+       'this focal length, index n and thickness t. 0 = derive f from r1, r2, t, n.',
+       0.0, 1.0e4),
+    _d('lens.exposure_constant_q', 2.0, '1',
+       'Exposure constant q of the f-number n_f = sqrt(2/q) f / d_a (eq. 16-18).', 1.0e-3, 1.0e3),
+    # --- lens tolerances: 1-sigma, Gaussian (eq. 9, 25) ---
+    _d('lens.tolerance.r1_mm', 0.01, 'mm', '1-sigma manufacturing tolerance of r1.', 0.0, 1.0e3),
+    _d('lens.tolerance.r2_mm', 0.01, 'mm', '1-sigma manufacturing tolerance of r2.', 0.0, 1.0e3),
+    _d('lens.tolerance.thickness_mm', 0.02, 'mm', '1-sigma tolerance of the thickness t.',
+       0.0, 1.0e3),
+    _d('lens.tolerance.refractive_index', 0.0005, '1', '1-sigma tolerance of the index n.',
+       0.0, 1.0),
+    _d('lens.tolerance.aperture_diameter_mm', 0.01, 'mm',
+       '1-sigma tolerance of the aperture diameter d_a (hyperfocal sigma, eq. 25).', 0.0, 1.0e3),
+    # --- lens: general prescription (non-empty arrays select prescription mode) ---
+    _a('lens.surfaces.radius_mm', 'mm',
+       'Prescription mode: radius of each surface in order (0 = flat). Non-empty arrays '
+       'replace the thick lens.', -1.0e4, 1.0e4),
+    _a('lens.surfaces.thickness_mm', 'mm',
+       'Prescription mode: axial distance from each surface to the next (the last is ignored: '
+       'the sensor sits at the paraxial image plane).', 0.0, 1.0e4),
+    _a('lens.surfaces.refractive_index', '1',
+       'Prescription mode: refractive index after each surface (1.0 = air).', 1.0, 4.0),
+    _a('lens.surfaces.semi_diameter_mm', 'mm',
+       'Prescription mode: clear semi-diameter of each surface (0 = unlimited); empty = all '
+       'unlimited.', 0.0, 1.0e4),
+    _i('lens.stop_surface', 0, '1',
+       'Prescription mode: 0-based index of the surface whose axial point the chief ray '
+       'crosses (the aperture stop).', 0, 255),
+    # --- sensor ---
+    _d('sensor.pixel_size_x_um', 4.0625, 'um', 'Pixel pitch p_x along the image rows.',
+       0.01, 1.0e3),
+    _d('sensor.pixel_size_y_um', 4.4375, 'um', 'Pixel pitch p_y along the image columns.',
+       0.01, 1.0e3),
+    _i('sensor.width_px', 0, 'px', 'Sensor width p_r,x; 0 = take it from the incoming images.',
+       0, MAX_SIDE_PX),
+    _i('sensor.height_px', 0, 'px',
+       'Sensor height p_r,y; 0 = take it from the incoming images.', 0, MAX_SIDE_PX),
+    # --- scene ---
+    _d('scene.distance_mm', 1000.0, 'mm',
+       'Distance l from the front principal plane to the scene; 0 = infinity.', 0.0, 1.0e9),
+    _d('scene.focus_distance_mm', 0.0, 'mm',
+       'Distance the lens is focused at, for the depth of field (eq. 19-21); 0 = the scene '
+       'distance.', 0.0, 1.0e9),
+    _d('scene.circle_of_confusion_mm', 0.0, 'mm',
+       'Acceptable circle of confusion c (eq. 22); 0 = the paper default, 0.1 % of f.',
+       0.0, 10.0),
+    # --- output ---
+    _d('output.alpha', 0.0, '1',
+       'Scale of the corrected image as in getOptimalNewCameraMatrix: 0 keeps only valid pixels '
+       '(no black border), 1 keeps every source pixel in view.', 0.0, 1.0),
+    ParamSpec('output.interpolation', 'string', 'linear', '',
+              'Interpolation of the remap: nearest, linear, cubic or lanczos4. Depth images '
+              '(16UC1, 32FC1) always use nearest.', choices=INTERPOLATIONS),
+    _i('output.width_px', 0, 'px', 'Width of the corrected image; 0 = the input width.',
+       0, MAX_SIDE_PX),
+    _i('output.height_px', 0, 'px', 'Height of the corrected image; 0 = the input height.',
+       0, MAX_SIDE_PX),
+    # --- node behaviour (no effect on the model) ---
+    ParamSpec('lazy_subscription', 'bool', True, '',
+              'Subscribe to image_raw only while an output topic has a subscriber, like '
+              'image_proc; false = always subscribe.'),
+    _i('remap_threads', 1, '1',
+       'Threads OpenCV may use for the remap (cv2.setNumThreads); 0 = OpenCV default. One '
+       'thread leaves the second core to the camera driver and the DDS transport.', 0, 64),
+)
+
+#: Specs by name.
+SPECS: dict[str, ParamSpec] = {spec.name: spec for spec in SCHEMA}
+
+#: Names of the parameters that define the lens model and its maps.
+MODEL_PARAMS: tuple[str, ...] = tuple(spec.name for spec in SCHEMA if spec.is_model)
+
+
+def defaults() -> dict[str, ParamValue]:
+    """
+    Return the default value of every parameter (the paper's Case 2).
+
+    :return: a new dict; arrays are fresh lists.
+    """
+    return {spec.name: (list(spec.default) if isinstance(spec.default, list) else spec.default)
+            for spec in SCHEMA}
+
+
+def _is_real(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def coerce(spec: ParamSpec, value: Any) -> ParamValue:
+    """
+    Check one value against its spec and return it in its canonical Python type.
+
+    Integers are accepted for doubles (a YAML ``4`` for ``4.0``); everything else must match.
+
+    :param spec: the parameter's spec.
+    :param value: the proposed value.
+    :return: the value as ``float``, ``int``, ``str``, ``bool`` or ``list[float]``.
+    :raises ValueError: with a message naming the parameter, when the type, a bound or a choice
+        is violated or a number is not finite.
+    """
+    name = spec.name
+    if spec.type == 'bool':
+        if not isinstance(value, bool):
+            raise ValueError(f'{name}: expected true or false, got {value!r}')
+        return value
+    if spec.type == 'string':
+        if not isinstance(value, str):
+            raise ValueError(f'{name}: expected a string, got {value!r}')
+        if spec.choices and value not in spec.choices:
+            raise ValueError(f'{name}: expected one of {", ".join(spec.choices)}, got {value!r}')
+        return value
+    if spec.type == 'double_array':
+        if not isinstance(value, (list, tuple)) and not hasattr(value, 'tolist'):
+            raise ValueError(f'{name}: expected a list of numbers, got {value!r}')
+        items = list(value.tolist() if hasattr(value, 'tolist') else value)
+        out = []
+        for i, item in enumerate(items):
+            out.append(_check_number(spec, item, f'{name}[{i}]'))
+        return out
+    number = _check_number(spec, value, name)
+    if spec.type == 'integer':
+        if not float(number).is_integer():
+            raise ValueError(f'{name}: expected an integer, got {value!r}')
+        return int(number)
+    return float(number)
+
+
+def _check_number(spec: ParamSpec, value: Any, label: str) -> float:
+    if not _is_real(value):
+        raise ValueError(f'{label}: expected a number, got {value!r}')
+    if spec.type == 'integer' and isinstance(value, float) and not value.is_integer():
+        raise ValueError(f'{label}: expected an integer, got {value!r}')
+    if not math.isfinite(value):
+        raise ValueError(f'{label}: must be finite, got {value!r}')
+    unit = f' {spec.unit}' if spec.unit not in ('', '1') else ''
+    if spec.minimum is not None and value < spec.minimum:
+        raise ValueError(f'{label}: {value:g}{unit} is below the minimum {spec.minimum:g}{unit}')
+    if spec.maximum is not None and value > spec.maximum:
+        raise ValueError(f'{label}: {value:g}{unit} is above the maximum {spec.maximum:g}{unit}')
+    return value
+
+
+def check_values(values: Mapping[str, Any], *, partial: bool = False) -> dict[str, ParamValue]:
+    """
+    Check a parameter mapping against the schema and fill in defaults.
+
+    :param values: parameter name -> value. Unknown names are an error.
+    :param partial: when True, return only the names given (no defaults filled in).
+    :return: the canonical values, every schema name present unless ``partial``.
+    :raises ValueError: naming the first bad parameter.
+    """
+    unknown = sorted(set(values) - set(SPECS))
+    if unknown:
+        raise ValueError(f'unknown parameter {unknown[0]!r} (known: lens.*, sensor.*, scene.*, '
+                         'output.*, lazy_subscription, remap_threads)')
+    out: dict[str, ParamValue] = {} if partial else defaults()
+    for name, value in values.items():
+        out[name] = coerce(SPECS[name], value)
+    return out
+
+
+def load_params_file(path: str | Path, node_name: str = 'correct_node') -> dict[str, ParamValue]:
+    """
+    Read a ROS 2 params file (``/**: ros__parameters:`` or ``<node>: ros__parameters:``).
+
+    Nested keys are flattened with dots (``lens: {r1_mm: 4.0}`` -> ``lens.r1_mm``), as
+    rclpy does. Sections for ``/**``, ``node_name`` and ``/node_name`` are merged in that
+    order; others are ignored.
+
+    :param path: the YAML file.
+    :param node_name: the node whose section applies besides ``/**``.
+    :return: the checked values of every schema parameter (defaults where the file is silent).
+    :raises ValueError: when the file is not a params file or holds a bad value.
+    :raises OSError: when the file cannot be read.
+    """
+    with open(path, encoding='utf-8') as stream:
+        try:
+            document = yaml.safe_load(stream)
+        except yaml.YAMLError as err:
+            raise ValueError(f'{path}: not valid YAML ({err})') from None
+    if not isinstance(document, dict):
+        raise ValueError(f'{path}: expected a ROS 2 params file ("/**: ros__parameters: ...")')
+    merged: dict[str, Any] = {}
+    found = False
+    for key in ('/**', node_name, '/' + node_name):
+        section = document.get(key)
+        if isinstance(section, dict) and isinstance(section.get('ros__parameters'), dict):
+            merged.update(flatten(section['ros__parameters']))
+            found = True
+    if not found:
+        raise ValueError(f'{path}: no "/**" or "{node_name}" section with ros__parameters')
+    merged = {k: v for k, v in merged.items() if k != 'use_sim_time' and
+              not k.startswith('qos_overrides.')}
+    return check_values(merged)
+
+
+def flatten(tree: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
+    """
+    Flatten nested YAML mappings into dotted parameter names.
+
+    :param tree: the ``ros__parameters`` mapping.
+    :param prefix: the dotted prefix of ``tree`` itself.
+    :return: ``{'lens.r1_mm': 4.0, ...}``.
+    """
+    flat: dict[str, Any] = {}
+    for key, value in tree.items():
+        name = f'{prefix}{key}'
+        if isinstance(value, dict):
+            flat.update(flatten(value, name + '.'))
+        else:
+            flat[name] = value
+    return flat
+
+
+def to_params_yaml(values: Mapping[str, Any], node_name: str = '/**',
+                   names: Sequence[str] | None = None) -> str:
+    """
+    Write values as a ROS 2 params file, nested by the dotted names.
+
+    :param values: parameter name -> value.
+    :param node_name: the section key (``/**`` matches every node).
+    :param names: the names to write, in order; default every name in ``values``.
+    :return: YAML text; floats always carry a decimal point, as rclpy requires for doubles.
+    """
+    tree: dict[str, Any] = {}
+    for name in names if names is not None else list(values):
+        node = tree
+        *parents, leaf = name.split('.')
+        for part in parents:
+            node = node.setdefault(part, {})
+        value = values[name]
+        node[leaf] = [float(v) for v in value] if isinstance(value, list) else value
+    return yaml.safe_dump({node_name: {'ros__parameters': tree}}, sort_keys=False)

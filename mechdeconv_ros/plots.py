@@ -1,0 +1,106 @@
+# Copyright 2026 The mechdeconv_ros Authors.
+# SPDX-License-Identifier: Apache-2.0
+"""
+Pictures of a LensModel: distortion curve, displacement field, a grid before and after.
+
+Matplotlib with the Agg backend (no display needed). The grid is rendered in the ideal
+(corrected) image and pushed through the forward model to make what the camera would see, so
+the "after" panel shows the correction undoing the lens.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from mechdeconv_ros.model import LensModel
+
+
+def grid_image(width: int, height: int, cells_x: int = 20, cells_y: int = 18,
+               line_px: int = 2) -> np.ndarray:
+    """
+    Draw a box grid (the paper's 20 x 18 target), white lines on black.
+
+    :param width: image width in px.
+    :param height: image height in px.
+    :param cells_x: boxes across.
+    :param cells_y: boxes down.
+    :param line_px: line width in px.
+    :return: ``(height, width)`` uint8.
+    """
+    image = np.zeros((height, width), np.uint8)
+    margin_x, margin_y = 0.04 * width, 0.04 * height
+    for x in np.linspace(margin_x, width - 1 - margin_x, cells_x + 1):
+        image[:, max(0, int(round(x)) - line_px // 2):int(round(x)) + (line_px + 1) // 2] = 255
+    for y in np.linspace(margin_y, height - 1 - margin_y, cells_y + 1):
+        image[max(0, int(round(y)) - line_px // 2):int(round(y)) + (line_px + 1) // 2, :] = 255
+    return image
+
+
+def plot_model(model: LensModel, path: Path) -> None:
+    """
+    Write a four-panel PNG: curve, displacement field, raw grid, corrected grid.
+
+    :param model: the lens model.
+    :param path: the PNG to write.
+    """
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    from mechdeconv_ros.remap import distort_image, Rectifier
+
+    fig, axes = plt.subplots(2, 2, figsize=(12, 9))
+    pitch = min(model.pixel_mm)
+    ideal, real = model.curve.ideal_mm, model.curve.real_mm
+    ax = axes[0, 0]
+    ax.plot(ideal, (real - ideal) / pitch, color='tab:blue')
+    ax.set_xlabel('ideal (pinhole) image height [mm]')
+    ax.set_ylabel('real - ideal [px]', color='tab:blue')
+    corner = np.hypot(model.width / 2 * model.pixel_mm[0], model.height / 2 * model.pixel_mm[1])
+    ax.axvline(float(model.curve.ideal_from_real(np.array(min(corner, real[-1])))),
+               color='grey', ls='--', lw=0.8, label='raw image corner')
+    ax.set_title(f'traced radial distortion ({model.distortion_model} fit RMS '
+                 f'{model.fit_rms_px:.2g} px)')
+    ax.legend(loc='lower left')
+    ax2 = ax.twinx()
+    with np.errstate(invalid='ignore', divide='ignore'):
+        ax2.plot(ideal[1:], 100.0 * (real[1:] / ideal[1:] - 1.0), color='tab:orange')
+    ax2.set_ylabel('distortion [%]', color='tab:orange')
+
+    ax = axes[0, 1]
+    nx, ny = 24, 18
+    u, v = np.meshgrid(np.linspace(0, model.width - 1, nx), np.linspace(0, model.height - 1, ny))
+    # Where each raw pixel belongs on the pinhole sensor, in raw pixels: the real radius
+    # scaled by ideal / real along the same direction.
+    x_mm = (u - model.K[0, 2]) * model.pixel_mm[0]
+    y_mm = (v - model.K[1, 2]) * model.pixel_mm[1]
+    rho = np.hypot(x_mm, y_mm)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        gain = np.where(rho > 0, model.curve.ideal_from_real(rho) / rho, 1.0) - 1.0
+    du, dv = x_mm * gain / model.pixel_mm[0], y_mm * gain / model.pixel_mm[1]
+    magnitude = np.hypot(du, dv)
+    quiver = ax.quiver(u, v, du, dv, magnitude, angles='xy', cmap='viridis')
+    fig.colorbar(quiver, ax=ax, label='displacement [px]')
+    ax.set_xlim(0, model.width - 1)
+    ax.set_ylim(model.height - 1, 0)
+    ax.set_aspect('equal')
+    ax.set_title(f'raw -> ideal displacement (max {model.max_displacement_px:.2f} px)')
+
+    grid = grid_image(model.out_width, model.out_height)
+    raw = distort_image(model, grid)
+    corrected = Rectifier(model).correct(raw)
+    for ax, image, title in ((axes[1, 0], raw, 'what the camera sees (grid through the lens)'),
+                             (axes[1, 1], corrected, 'corrected')):
+        ax.imshow(image, cmap='gray', interpolation='nearest')
+        ax.set_title(title)
+        ax.set_axis_off()
+    fig.suptitle(f"f = {model.focal_length_mm:.4g} mm, stop offset "
+                 f"{model.values['lens.stop_offset_mm']:g} mm, scene "
+                 f"{model.values['scene.distance_mm'] or 'inf'} mm, "
+                 f'{model.width}x{model.height} px')
+    fig.tight_layout()
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)

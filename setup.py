@@ -1,0 +1,30 @@
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = 'mechdeconv_ros'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.xml')),
+    ],
+    install_requires=['setuptools', 'numpy', 'opencv-python-headless', 'PyYAML'],
+    zip_safe=True,
+    maintainer='mechdeconv_ros maintainers',
+    maintainer_email='maintainers@mechdeconv.invalid',
+    description='Calibration-free lens distortion correction for ROS 2 camera streams.',
+    license='Apache-2.0',
+    extras_require={'test': ['pytest']},
+    entry_points={
+        'console_scripts': [
+            'correct_node = mechdeconv_ros.correct_node:main',
+            'mechdeconv = mechdeconv_ros.cli:main',
+            'demo_camera = mechdeconv_ros.demo_camera:main',
+        ],
+    },
+)

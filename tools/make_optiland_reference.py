@@ -1,0 +1,615 @@
+#!/usr/bin/env python3
+# Copyright 2026 The mechdeconv_ros Authors.
+# SPDX-License-Identifier: Apache-2.0
+"""
+Generate test/data/optiland_reference.json: independent ground truth from optiland.
+
+Used only by the tests (test/test_reference_optiland.py) and later by the accuracy
+benchmark. optiland is not a dependency of the package nor of ``make test``; install the pin
+of ``requirements-reference.txt`` (``pip install -r requirements-reference.txt``) and run::
+
+    python tools/make_optiland_reference.py            # writes test/data/optiland_reference.json
+    python tools/make_optiland_reference.py -o out.json
+
+Conventions (DESIGN.md section 2): mm; optical axis z, light travels +z, first lens vertex at
+z = 0; radius > 0 when the centre of curvature is on the image side, 0 = flat; thickness =
+axial distance to the next surface; index = index after the surface. One wavelength
+(0.55 um) and constant-index ``IdealMaterial`` glasses, so no dispersion enters.
+
+Thick lenses (the paper's Case 1 and Case 2 and the m_a / t variants of Case 2):
+
+- f = n r1 r2 / ((n-1)(n r2 - n r1 + t(n-1))) (paper eq. 8);
+  front principal plane z_H = -f(n-1)t/(n r2), rear z_H' = t - f(n-1)t/(n r1);
+- aperture stop: the plane z_s = z_H - m_a. Inside the glass it is modelled in optiland by
+  splitting the glass with a flat dummy surface (same index on both sides) that is the stop;
+- object plane at z = z_H - l (l = 1000 mm from H); sensor at the paraxial image plane,
+  v = f l / (l - f) behind H' (placed by the closed form, then confirmed by optiland's
+  ``image_solve``; the difference is recorded).
+
+Cooke triplet: ``optiland.samples.objectives.CookeTriplet`` with each glass replaced by an
+``IdealMaterial`` of its own index at 0.55 um, stop at its own stop surface, object at
+infinity, sensor at the paraxial back focal plane.
+
+Chief rays: optiland's default ray aiming is paraxial, which misses the centre of a stop that
+sits inside the glass by ~9 um at the Case 2 corner (half a pixel at the image). Every chief
+ray here is aimed with optiland's ``'iterative'`` aimer (Newton on real traces, tolerance
+``AIM_TOL_MM`` at the stop) and the crossing of the stop is re-measured from the traced
+surface intersections and recorded (``stop_height_mm``, ``max_stop_residual_mm``). The
+distortion curve is also traced with the ``'robust'`` aimer and with paraxial aiming; their
+differences from the iterative result are recorded under ``aiming``.
+
+Signs: the object point lies at +y (finite: height Y > 0; infinity: the chief ray arrives
+travelling towards -y, i.e. optiland's angle field -Hy), ``tan_field`` = its tangent seen from
+the front principal point, > 0, and ``rho_ideal_mm`` = v tan_field > 0. ``real_height_mm`` is
+the chief ray's height on the sensor plane signed as optiland gives it (a real image is
+inverted: negative); ``real_height_abs_mm`` is its magnitude.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import math
+import os
+from pathlib import Path
+import platform
+import sys
+import time
+from typing import Any
+import warnings
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+DEFAULT_OUTPUT = REPO / 'test' / 'data' / 'optiland_reference.json'
+
+WAVELENGTH_UM = 0.55
+#: Chief-ray aiming tolerance at the stop, mm (optiland 'iterative' aimer).
+AIM_TOL_MM = 1.0e-11
+AIM_MAX_ITER = 50
+#: Samples of the distortion curve, tan_field from 0 to its maximum.
+CURVE_SAMPLES = 129
+#: The curve reaches this multiple of the sensor half-diagonal in ideal image height.
+CURVE_REACH = 1.25
+#: Box grid for the radii mean error experiment: columns x rows, fraction of the sensor.
+GRID_NX = 20
+GRID_NY = 18
+GRID_COVERAGE = 0.95
+
+SENSOR_CASE2 = {'width_px': 640, 'height_px': 480, 'pixel_x_um': 4.0625, 'pixel_y_um': 4.4375}
+SENSOR_CASE1 = {'width_px': 1600, 'height_px': 1200, 'pixel_x_um': 4.4, 'pixel_y_um': 4.4}
+
+#: The thick lenses: (key, description, n, r1, r2, t, m_a, aperture diameter, l, sensor).
+THICK_LENSES = (
+    ('case2', 'Case 2 (paper default, 0.4 Mpx CMOS)', 1.5168, 4.0, -4.0, 3.0, 0.2, 1.0,
+     1000.0, SENSOR_CASE2),
+    ('case2_ma0.0', 'Case 2 with m_a = 0.0 mm', 1.5168, 4.0, -4.0, 3.0, 0.0, 1.0, 1000.0,
+     SENSOR_CASE2),
+    ('case2_ma0.5', 'Case 2 with m_a = 0.5 mm', 1.5168, 4.0, -4.0, 3.0, 0.5, 1.0, 1000.0,
+     SENSOR_CASE2),
+    ('case2_ma1.0', 'Case 2 with m_a = 1.0 mm', 1.5168, 4.0, -4.0, 3.0, 1.0, 1.0, 1000.0,
+     SENSOR_CASE2),
+    ('case2_t4', 'Case 2 with t = 4 mm', 1.5168, 4.0, -4.0, 4.0, 0.2, 1.0, 1000.0,
+     SENSOR_CASE2),
+    ('case2_t5', 'Case 2 with t = 5 mm', 1.5168, 4.0, -4.0, 5.0, 0.2, 1.0, 1000.0,
+     SENSOR_CASE2),
+    ('case1', 'Case 1 (paper, 2 Mpx CCD)', 1.5168, 6.0, -6.0, 4.0, 0.3, 1.5, 1000.0,
+     SENSOR_CASE1),
+)
+
+#: The Cooke triplet is compared at 5 um pixels (it has no sensor of its own).
+COOKE_PIXEL_UM = 5.0
+
+
+def log(msg: str) -> None:
+    """Print a progress line to stderr, with the elapsed time."""
+    print(f'[{time.monotonic() - _T0:6.1f} s] {msg}', file=sys.stderr, flush=True)
+
+
+_T0 = time.monotonic()
+
+
+def thick_lens_closed_form(n: float, r1: float, r2: float, t: float,
+                           l_mm: float) -> dict[str, float]:
+    """
+    Paraxial data of a thick lens in air from the paper's closed forms (eq. 7-8).
+
+    :param n: refractive index of the glass
+    :param r1: front radius, mm
+    :param r2: rear radius, mm
+    :param t: centre thickness, mm
+    :param l_mm: object distance from the front principal plane, mm
+    :return: f, z_H, z_H', v = f l / (l - f) and the sensor z, all mm
+    """
+    f = n * r1 * r2 / ((n - 1.0) * (n * r2 - n * r1 + t * (n - 1.0)))
+    z_h = -f * (n - 1.0) * t / (n * r2)
+    z_hp = t - f * (n - 1.0) * t / (n * r1)
+    v = f * l_mm / (l_mm - f)
+    return {'efl_mm': f, 'front_principal_z_mm': z_h, 'rear_principal_z_mm': z_hp,
+            'image_distance_mm': v, 'sensor_z_mm': z_hp + v}
+
+
+def _optic_from_rows(rows: list[dict[str, Any]], object_thickness: float, image_gap: float,
+                     aperture_diameter: float | None, epd: float | None):
+    """
+    Build an optiland ``Optic`` from rows of (radius, thickness, index, is_stop).
+
+    :param rows: the lens surfaces in order; radius 0 = flat; index after the surface
+    :param object_thickness: object plane to first surface, mm (``inf`` for infinity)
+    :param image_gap: last surface to the image plane, mm
+    :param aperture_diameter: stop diameter for ``float_by_stop_size`` (or None)
+    :param epd: entrance pupil diameter (used when ``aperture_diameter`` is None)
+    :return: the optic
+    """
+    from optiland import optic
+    from optiland.materials import IdealMaterial
+
+    lens = optic.Optic()
+    lens.surfaces.add(index=0, radius=np.inf, thickness=object_thickness)
+    for i, row in enumerate(rows, start=1):
+        radius = row['radius_mm'] if row['radius_mm'] != 0.0 else np.inf
+        thickness = row['thickness_mm'] if i < len(rows) else image_gap
+        lens.surfaces.add(index=i, radius=radius, thickness=thickness,
+                          material=IdealMaterial(row['refractive_index']),
+                          is_stop=bool(row.get('is_stop', False)))
+    lens.surfaces.add(index=len(rows) + 1)
+    if aperture_diameter is not None:
+        lens.set_aperture(aperture_type='float_by_stop_size', value=aperture_diameter)
+    else:
+        lens.set_aperture(aperture_type='EPD', value=epd)
+    lens.wavelengths.add(value=WAVELENGTH_UM, is_primary=True)
+    return lens
+
+
+def thick_lens_rows(n: float, r1: float, r2: float, t: float,
+                    z_s: float) -> list[dict[str, Any]]:
+    """
+    Optiland surfaces of a thick lens with the stop plane z_s as an extra flat surface.
+
+    Inside the glass the dummy splits it (index n on both sides); before or after the lens it
+    is a flat surface in air.
+
+    :return: rows with radius_mm, thickness_mm (to the next row), refractive_index, is_stop
+    """
+    glass = {'radius_mm': r1, 'thickness_mm': t, 'refractive_index': n, 'is_stop': False}
+    rear = {'radius_mm': r2, 'thickness_mm': 0.0, 'refractive_index': 1.0, 'is_stop': False}
+    if 0.0 < z_s < t:
+        return [dict(glass, thickness_mm=z_s),
+                {'radius_mm': 0.0, 'thickness_mm': t - z_s, 'refractive_index': n,
+                 'is_stop': True},
+                rear]
+    if z_s <= 0.0:
+        return [{'radius_mm': 0.0, 'thickness_mm': -z_s, 'refractive_index': 1.0,
+                 'is_stop': True}, glass, rear]
+    return [glass, dict(rear, thickness_mm=z_s - t),
+            {'radius_mm': 0.0, 'thickness_mm': 0.0, 'refractive_index': 1.0, 'is_stop': True}]
+
+
+def build_thick_lens(n: float, r1: float, r2: float, t: float, m_a: float,
+                     aperture_diameter: float, l_mm: float, field_max_mm: float):
+    """
+    Build one thick lens in optiland, object at l from H, sensor at the paraxial image.
+
+    :return: (optic, rows, first_vertex_z, closed-form dict); optiland z positions are shifted
+        so that ``first_vertex_z`` is where our z = 0 (the first glass vertex) lies
+    """
+    cf = thick_lens_closed_form(n, r1, r2, t, l_mm)
+    z_s = cf['front_principal_z_mm'] - m_a
+    rows = thick_lens_rows(n, r1, r2, t, z_s)
+    first_z = min(0.0, z_s)                      # our z of optiland's surface 1
+    object_thickness = first_z - (cf['front_principal_z_mm'] - l_mm)
+    last_z = max(t, z_s)
+    lens = _optic_from_rows(rows, object_thickness, cf['sensor_z_mm'] - last_z,
+                            aperture_diameter, None)
+    lens.fields.set_type(field_type='object_height')
+    lens.fields.add(y=0.0)
+    lens.fields.add(y=field_max_mm)
+    # optiland 0.6.3: the iterative aimer reads the stop's semi_aperture, which only
+    # update_paraxial sets (TypeError on None otherwise). No surface gets a clipping aperture.
+    lens.updater.update_paraxial()
+    return lens, rows, first_z, cf
+
+
+def build_cooke():
+    """
+    Build optiland's sample Cooke triplet with fixed-index glasses at ``WAVELENGTH_UM``.
+
+    :return: (optic, rows, glass indices by name)
+    """
+    from optiland.samples.objectives import CookeTriplet
+
+    sample = CookeTriplet()
+    rows = []
+    glasses: dict[str, float] = {}
+    for s in list(sample.surfaces)[1:-1]:
+        index = float(np.asarray(s.material_post.n(WAVELENGTH_UM)).reshape(-1)[0])
+        name = getattr(s.material_post, 'name', None)
+        if name is not None:
+            glasses[f'{name} ({s.material_post.reference})'] = index
+        radius = float(s.geometry.radius)
+        rows.append({'radius_mm': 0.0 if math.isinf(radius) else radius,
+                     'thickness_mm': float(s.thickness), 'refractive_index': index,
+                     'is_stop': bool(s.is_stop)})
+    lens = _optic_from_rows(rows, np.inf, rows[-1]['thickness_mm'], None,
+                            float(sample.aperture.value))
+    lens.fields.set_type(field_type='angle')
+    for y in sample.fields.y_fields:
+        lens.fields.add(y=float(y))
+    lens.updater.update_paraxial()
+    return lens, rows, glasses
+
+
+def set_aiming(lens, mode: str) -> None:
+    """Select optiland's chief-ray aiming (``'paraxial'``, ``'iterative'`` or ``'robust'``)."""
+    lens.ray_tracer.set_aiming(mode, max_iter=AIM_MAX_ITER, tol=AIM_TOL_MM)
+
+
+def trace_chief(lens, hx: np.ndarray, hy: np.ndarray, mode: str = 'iterative') -> dict:
+    """
+    Trace chief rays (pupil 0, 0) at normalised fields and read every surface crossing.
+
+    :return: dict of numpy arrays: object x/y/z and direction at launch, image x/y, stop x/y
+        and the heights at every surface
+    """
+    set_aiming(lens, mode)
+    hx = np.asarray(hx, dtype=float)
+    hy = np.asarray(hy, dtype=float)
+    zeros = np.zeros_like(hy)
+    rays = lens.trace_generic(hx, hy, zeros, zeros, WAVELENGTH_UM)
+    surfaces = list(lens.surfaces)
+
+    def at(i: int, name: str) -> np.ndarray:
+        return np.array(getattr(surfaces[i], name), dtype=float).reshape(-1)
+
+    stop = lens.surfaces.stop_index
+    out = {
+        'x_img': np.array(rays.x, dtype=float), 'y_img': np.array(rays.y, dtype=float),
+        'x_stop': at(stop, 'x'), 'y_stop': at(stop, 'y'),
+        'x0': at(0, 'x'), 'y0': at(0, 'y'), 'M0': at(0, 'M'), 'N0': at(0, 'N'),
+        'r_surf': np.array([np.hypot(at(i, 'x'), at(i, 'y')) for i in range(len(surfaces))]),
+    }
+    return out
+
+
+def paraxial_data(lens, first_z: float) -> dict[str, float]:
+    """
+    Paraxial data as optiland computes it, in our z (first glass vertex at 0).
+
+    optiland's P1 is measured from its surface 1 and P2 from the image surface.
+    """
+    p = lens.paraxial
+    z = [float(s.geometry.cs.z) for s in lens.surfaces]
+    to_ours = first_z - z[1]
+    image_z = z[-1] + to_ours
+    rear = float(p.P2()) + image_z
+    front = float(p.P1()) + first_z
+    finite = not lens.object_surface.is_infinite
+    return {
+        'efl_mm': float(p.f2()),
+        'front_principal_z_mm': front,
+        'rear_principal_z_mm': rear,
+        'image_distance_mm': image_z - rear,
+        'sensor_z_mm': image_z,
+        'magnification': float(p.magnification()) if finite else 0.0,
+        'rear_focal_z_mm': float(p.F2()) + image_z,
+        'front_focal_z_mm': float(p.F1()) + first_z,
+    }
+
+
+def image_solve_check(lens) -> float:
+    """Return how far (mm) optiland's ``image_solve`` moves the image plane (then undo it)."""
+    z_before = float(lens.surfaces[-1].geometry.cs.z)
+    gap_before = float(lens.surfaces[-2].thickness)
+    lens.updater.image_solve()
+    moved = float(lens.surfaces[-1].geometry.cs.z) - z_before
+    lens.updater.set_thickness(gap_before, len(lens.surfaces) - 2)
+    return moved
+
+
+def our_prescription(rows: list[dict[str, Any]], stop_z: float,
+                     semi: list[float] | None = None) -> dict[str, Any]:
+    """
+    Prescription in our form: the dummy stop surface dropped, its gap given to its neighbour.
+
+    The last thickness is 0: the sensor is placed separately (``paraxial.sensor_z_mm``).
+    """
+    surfaces: list[dict[str, Any]] = []
+    stop_surface = None
+    for i, r in enumerate(rows):
+        before = 1.0 if i == 0 else rows[i - 1]['refractive_index']
+        dummy = r['radius_mm'] == 0.0 and before == r['refractive_index']
+        if dummy:
+            if surfaces:
+                surfaces[-1]['thickness_mm'] += r['thickness_mm']
+            continue
+        if r['is_stop']:
+            stop_surface = len(surfaces)
+        surfaces.append({'radius_mm': r['radius_mm'], 'thickness_mm': r['thickness_mm'],
+                         'refractive_index': r['refractive_index'],
+                         'semi_diameter_mm': 0.0 if semi is None else semi[i]})
+    surfaces[-1]['thickness_mm'] = 0.0
+    return {'surfaces': surfaces, 'stop_z_mm': stop_z, 'stop_surface': stop_surface,
+            'object_index': 1.0}
+
+
+def sensor_info(sensor: dict[str, Any]) -> dict[str, Any]:
+    """Sensor size and half-diagonal (corner radius, from the image centre), mm."""
+    w = sensor['width_px'] * sensor['pixel_x_um'] * 1e-3
+    h = sensor['height_px'] * sensor['pixel_y_um'] * 1e-3
+    return dict(sensor, width_mm=w, height_mm=h, corner_radius_mm=0.5 * math.hypot(w, h),
+                tolerance_pixel_um=min(sensor['pixel_x_um'], sensor['pixel_y_um']))
+
+
+def lst(a: np.ndarray) -> list[float]:
+    """Return a numpy array as a list of Python floats (round-trip exact in JSON)."""
+    return [float(v) for v in np.asarray(a, dtype=float).ravel()]
+
+
+def curve_and_aiming(lens, tan_max: float, finite: bool, l_mm: float, v: float,
+                     field_max: float, pixel_um: float) -> tuple[dict, dict]:
+    """
+    Trace the distortion curve (iterative aiming), cross-check with robust and paraxial.
+
+    :return: (curve dict, aiming dict)
+    """
+    tan = np.linspace(0.0, tan_max, CURVE_SAMPLES)
+    if finite:
+        hy = tan * l_mm / field_max
+    else:
+        # optiland's angle field +Hy launches rays travelling towards +y, i.e. from an object
+        # point below the axis: trace -Hy so that the object lies at +y as in the finite case
+        hy = -np.degrees(np.arctan(tan)) / field_max
+    hy[-1] = np.clip(hy[-1], -1.0, 1.0)
+    zeros = np.zeros_like(hy)
+    it = trace_chief(lens, zeros, hy, 'iterative')
+    # the field actually launched: object height / l, or the launch direction
+    tan_launched = it['y0'] / l_mm if finite else -it['M0'] / it['N0']
+    rb = trace_chief(lens, zeros, hy, 'robust')
+    px = trace_chief(lens, zeros, hy, 'paraxial')
+    pix_mm = pixel_um * 1e-3
+    curve = {
+        'samples': CURVE_SAMPLES,
+        'tan_field': lst(tan_launched),
+        'rho_ideal_mm': lst(v * tan_launched),
+        'real_height_mm': lst(it['y_img']),
+        'real_height_abs_mm': lst(np.abs(it['y_img'])),
+        'stop_height_mm': lst(it['y_stop']),
+        'max_chief_height_at_surface_mm': lst(it['r_surf'][1:-1].max(axis=1)),
+    }
+    aiming = {
+        'mode': 'iterative',
+        'tol_mm': AIM_TOL_MM,
+        'max_iter': AIM_MAX_ITER,
+        'max_stop_residual_mm': float(np.max(np.hypot(it['x_stop'], it['y_stop']))),
+        'robust_max_stop_residual_mm': float(np.max(np.hypot(rb['x_stop'], rb['y_stop']))),
+        'robust_minus_iterative_max_abs_px':
+            float(np.max(np.abs(rb['y_img'] - it['y_img'])) / pix_mm),
+        'paraxial_aiming_max_stop_residual_mm':
+            float(np.max(np.hypot(px['x_stop'], px['y_stop']))),
+        'paraxial_aiming_max_image_error_px':
+            float(np.max(np.abs(px['y_img'] - it['y_img'])) / pix_mm),
+        'pixel_um': pixel_um,
+    }
+    if not np.allclose(tan_launched, tan, rtol=1e-12, atol=1e-15):
+        raise RuntimeError('optiland launched other fields than requested')
+    return curve, aiming
+
+
+def grid(lens, l_mm: float, v: float, sens: dict[str, Any], field_max: float) -> dict:
+    """
+    Real sensor positions of a box grid of object points (radii mean error experiment).
+
+    Ideal (pinhole) positions x_i = v X / l, y_i = v Y / l cover ``GRID_COVERAGE`` of the sensor
+    width and height; each object point (X, Y) is traced as a real two-dimensional field.
+    """
+    xs = np.linspace(-1.0, 1.0, GRID_NX) * 0.5 * GRID_COVERAGE * sens['width_mm']
+    ys = np.linspace(-1.0, 1.0, GRID_NY) * 0.5 * GRID_COVERAGE * sens['height_mm']
+    xi, yi = np.meshgrid(xs, ys)              # rows: y, columns: x
+    xi, yi = xi.ravel(), yi.ravel()
+    obj_x, obj_y = xi * l_mm / v, yi * l_mm / v
+    r = trace_chief(lens, obj_x / field_max, obj_y / field_max, 'iterative')
+    if not (np.allclose(r['x0'], obj_x, rtol=1e-12, atol=1e-12)
+            and np.allclose(r['y0'], obj_y, rtol=1e-12, atol=1e-12)):
+        raise RuntimeError('optiland launched other object points than requested')
+    # rotational symmetry: the same radii traced as meridional fields, turned to each azimuth
+    radius = np.hypot(obj_x, obj_y)
+    m = trace_chief(lens, np.zeros_like(radius), radius / field_max, 'iterative')
+    sym = max(np.max(np.abs(m['y_img'] * obj_x / radius - r['x_img'])),
+              np.max(np.abs(m['y_img'] * obj_y / radius - r['y_img'])))
+    return {
+        'nx': GRID_NX, 'ny': GRID_NY, 'coverage': GRID_COVERAGE,
+        'order': 'row-major: y (rows, ny) outer, x (columns, nx) inner',
+        'object_x_mm': lst(obj_x), 'object_y_mm': lst(obj_y),
+        'tan_x': lst(obj_x / l_mm), 'tan_y': lst(obj_y / l_mm),
+        'ideal_x_mm': lst(xi), 'ideal_y_mm': lst(yi),
+        'real_x_mm': lst(r['x_img']), 'real_y_mm': lst(r['y_img']),
+        'stop_x_mm': lst(r['x_stop']), 'stop_y_mm': lst(r['y_stop']),
+        'max_stop_residual_mm': float(np.max(np.hypot(r['x_stop'], r['y_stop']))),
+        'skew_vs_meridional_max_abs_mm': float(sym),
+    }
+
+
+def thick_lens_entry(spec: tuple) -> tuple[dict, dict]:
+    """Reference entry and grid of one thick lens."""
+    key, desc, n, r1, r2, t, m_a, ap, l_mm, sensor = spec
+    sens = sensor_info(sensor)
+    cf = thick_lens_closed_form(n, r1, r2, t, l_mm)
+    tan_max = CURVE_REACH * sens['corner_radius_mm'] / cf['image_distance_mm']
+    field_max = tan_max * l_mm
+    lens, rows, first_z, cf = build_thick_lens(n, r1, r2, t, m_a, ap, l_mm, field_max)
+    moved = image_solve_check(lens)
+    par = paraxial_data(lens, first_z)
+    z_s = cf['front_principal_z_mm'] - m_a
+    curve, aiming = curve_and_aiming(lens, tan_max, True, l_mm, par['image_distance_mm'],
+                                     field_max, sens['tolerance_pixel_um'])
+    if curve['real_height_abs_mm'][-1] <= sens['corner_radius_mm']:
+        raise RuntimeError(f'{key}: the curve does not reach the sensor corner')
+    g = grid(lens, l_mm, par['image_distance_mm'], sens, field_max)
+    # rim: where the two spheres meet (for the record; no surface is clipped)
+    entry = {
+        'description': desc,
+        'kind': 'thick_lens',
+        'thick_lens': {'refractive_index': n, 'r1_mm': r1, 'r2_mm': r2, 'thickness_mm': t,
+                       'stop_offset_mm': m_a, 'aperture_diameter_mm': ap},
+        'object_distance_mm': l_mm,
+        'object_distance_from': 'front principal plane H',
+        'object_z_mm': cf['front_principal_z_mm'] - l_mm,
+        'wavelength_um': WAVELENGTH_UM,
+        'sensor': sens,
+        'prescription': our_prescription(thick_lens_rows(n, r1, r2, t, -1.0)[1:], z_s),
+        'optiland_surfaces': optiland_surface_table(lens, first_z, rows),
+        'paraxial': par,
+        'closed_form': cf,
+        'optiland_image_solve_shift_mm': moved,
+        'curve': curve,
+        'aiming': aiming,
+    }
+    return entry, g
+
+
+def optiland_surface_table(lens, first_z: float, rows: list[dict[str, Any]]) -> list[dict]:
+    """The optiland model as built: object, lens rows (dummy stop included), image."""
+    z = [float(s.geometry.cs.z) for s in lens.surfaces]
+    shift = first_z - z[1]
+    table = []
+    for i, s in enumerate(lens.surfaces):
+        radius = float(s.geometry.radius)
+        table.append({
+            'index': i,
+            'radius_mm': 0.0 if math.isinf(radius) else radius,
+            'thickness_mm': float(s.thickness) if math.isfinite(float(s.thickness)) else None,
+            'z_mm': z[i] + shift if math.isfinite(z[i]) else None,
+            'refractive_index_after': float(np.asarray(
+                s.material_post.n(WAVELENGTH_UM)).reshape(-1)[0]),
+            'is_stop': bool(s.is_stop),
+            'role': 'object' if i == 0 else 'image' if i == len(z) - 1 else 'lens',
+        })
+    return table
+
+
+def cooke_entry() -> dict:
+    """Reference entry of the fixed-index Cooke triplet (object at infinity)."""
+    lens, rows, glasses = build_cooke()
+    moved = image_solve_check(lens)
+    lens.updater.image_solve()                   # sensor at the paraxial back focal plane
+    par = paraxial_data(lens, 0.0)
+    lens.updater.update_paraxial()
+    semi = [float(s.semi_aperture) for s in list(lens.surfaces)[1:-1]]
+    z = [float(s.geometry.cs.z) for s in lens.surfaces]
+    stop_index = lens.surfaces.stop_index
+    field_max = float(lens.fields.max_field)
+    tan_max = math.tan(math.radians(field_max))
+    curve, aiming = curve_and_aiming(lens, tan_max, False, math.inf, par['efl_mm'],
+                                     field_max, COOKE_PIXEL_UM)
+    presc = our_prescription(rows, z[stop_index], semi)
+    if max(curve['max_chief_height_at_surface_mm'][i] - semi[i] for i in range(len(semi))) > 0:
+        raise RuntimeError('cooke: a chief ray exceeds a paraxial semi-aperture')
+    return {
+        'description': 'optiland.samples.objectives.CookeTriplet, glasses fixed at their index '
+                       f'at {WAVELENGTH_UM} um; semi-diameters from optiland update_paraxial '
+                       '(EPD 10 mm, field 20 deg)',
+        'kind': 'prescription',
+        'glass_indices_at_wavelength': glasses,
+        'object_distance_mm': None,
+        'object_at_infinity': True,
+        'field_max_deg': field_max,
+        'entrance_pupil_diameter_mm': float(lens.paraxial.EPD()),
+        'wavelength_um': WAVELENGTH_UM,
+        'sensor': {'tolerance_pixel_um': COOKE_PIXEL_UM},
+        'prescription': presc,
+        'optiland_surfaces': optiland_surface_table(lens, 0.0, rows),
+        'paraxial': par,
+        'optiland_image_solve_shift_mm': moved,
+        'image_distance_note': 'sample back focal gap 42.20778 mm replaced by image_solve',
+        'curve': curve,
+        'aiming': aiming,
+    }
+
+
+def versions() -> dict[str, str]:
+    """Versions of the packages that computed the reference."""
+    from importlib import metadata
+
+    out = {'python': platform.python_version(), 'platform': platform.platform()}
+    for name in ('optiland', 'numpy', 'numba', 'scipy'):
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            pass
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Generate the reference JSON."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0].strip())
+    parser.add_argument('-o', '--output', type=Path, default=DEFAULT_OUTPUT,
+                        help='output JSON (default: %(default)s)')
+    args = parser.parse_args(argv)
+    warnings.filterwarnings('ignore', module='numba')
+    warnings.filterwarnings('ignore', message='.*numba.*')
+    try:
+        from numba.core.errors import NumbaWarning
+        warnings.simplefilter('ignore', NumbaWarning)
+    except ImportError:
+        pass
+    log('importing optiland')
+    import optiland  # noqa: F401
+    lenses: dict[str, Any] = {}
+    grids: dict[str, Any] = {}
+    for spec in THICK_LENSES:
+        t0 = time.monotonic()
+        lenses[spec[0]], grids[spec[0]] = thick_lens_entry(spec)
+        a = lenses[spec[0]]['aiming']
+        log(f'{spec[0]:12s} done in {time.monotonic() - t0:5.1f} s: '
+            f'stop residual {a["max_stop_residual_mm"]:.1e} mm, grid '
+            f'{grids[spec[0]]["max_stop_residual_mm"]:.1e} mm; paraxial aiming would be off by '
+            f'{a["paraxial_aiming_max_image_error_px"]:.3f} px')
+    t0 = time.monotonic()
+    lenses['cooke_triplet'] = cooke_entry()
+    a = lenses['cooke_triplet']['aiming']
+    log(f'cooke_triplet done in {time.monotonic() - t0:5.1f} s: stop residual '
+        f'{a["max_stop_residual_mm"]:.1e} mm; paraxial aiming would be off by '
+        f'{a["paraxial_aiming_max_image_error_px"]:.3f} px')
+    cmd = ' '.join([Path(sys.executable).name,
+                    os.path.relpath(Path(__file__).resolve(), REPO)] + sys.argv[1:])
+    doc = {
+        'provenance': {
+            'generator': 'tools/make_optiland_reference.py',
+            'command': cmd,
+            'date_utc': datetime.datetime.now(datetime.timezone.utc).strftime(
+                '%Y-%m-%dT%H:%M:%SZ'),
+            'versions': versions(),
+            'runtime_s': round(time.monotonic() - _T0, 1),
+        },
+        'conventions': {
+            'units': 'mm unless the name says otherwise',
+            'axis': 'z along the optical axis, light travels +z, first lens vertex at z = 0',
+            'radius': '> 0 when the centre of curvature is on the image side; 0 = flat',
+            'thickness': 'axial distance to the next surface; the last is 0 (the sensor is at '
+                         'paraxial.sensor_z_mm)',
+            'refractive_index': 'index after the surface (constant, no dispersion)',
+            'stop': 'prescription.stop_z_mm is the stop plane the chief ray crosses at height '
+                    '0; stop_surface the 0-based surface index when the stop is a lens surface',
+            'tan_field': 'Y / l for a finite object (Y object height, l from H); tan(theta) at '
+                         'infinity',
+            'rho_ideal_mm': 'paraxial image distance v (from H\') times tan_field',
+            'real_height_mm': 'chief-ray height on the sensor plane, signed as optiland gives '
+                              'it (negative: inverted image)',
+            'grids': 'ideal_* = v * tan (same sign as the object point); real_* as optiland '
+                     'gives them (inverted)',
+            'aiming': 'optiland iterative ray aiming; stop residuals re-measured from the '
+                      'traced surface intersections',
+        },
+        'wavelength_um': WAVELENGTH_UM,
+        'lenses': lenses,
+        'grids': grids,
+    }
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    args.output.write_text(json.dumps(doc, indent=1) + '\n')
+    log(f'wrote {args.output} ({args.output.stat().st_size / 1024:.0f} KiB)')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
