@@ -54,6 +54,12 @@ class UnsupportedEncodingError(ImageFormatError):
     """The Image's encoding is not one the node corrects (Bayer, YUV, compressed, ...)."""
 
     def __init__(self, encoding: str, message: str) -> None:
+        """
+        Create the error.
+
+        :param encoding: the refused encoding.
+        :param message: what is wrong and how to fix it.
+        """
         super().__init__(message)
         self.encoding = encoding
 
@@ -117,7 +123,7 @@ def lookup_encoding(encoding: str) -> Encoding:
         return found
     lowered = encoding.lower()
     if lowered.startswith('bayer_'):
-        fix = ('it is raw Bayer mosaic data: debayer first, e.g. with image_proc\'s debayer '
+        fix = ("it is raw Bayer mosaic data: debayer first, e.g. with image_proc's debayer "
                'node (image_raw -> image_color/image_mono), and feed its output to this node')
     elif lowered.startswith(('yuv', 'uyvy', 'yuyv', 'nv12', 'nv21')):
         fix = ('it is packed/planar YUV: convert it to rgb8, bgr8 or mono8 first (most camera '

@@ -62,11 +62,13 @@ its chief ray downwards and, through a real inverted image, images at a negative
 The chief ray is the real ray from the object point that crosses the aperture-stop plane
 z = z_s at height 0. When z_s lies in object space (before the first vertex) it is simply
 the line through the stop centre. Otherwise it is found by ray aiming: the free parameter
-is the height h at which the object-space ray crosses the first-vertex plane z = 0; a
-vectorised, backtracking Newton iteration (central-difference-free forward difference)
-drives the stop height y_s(h) to |y_s| < 1e-10 mm x min(1, |tan| + 1e-6), starting from the
-paraxial chief ray (the ray towards the paraxial entrance pupil). The ideal image height is
-v tan(theta) = |m| Y; ``radial_map`` maps ideal to real heights.
+is the height h at which the object-space ray crosses the first-vertex plane z = 0 (a start
+point near the lens keeps the trace accurate for any l); a vectorised Newton iteration with
+step halving, its derivative by a forward difference in the same stacked trace, drives the
+stop height to |y_s| <= 1e-10 mm x min(1, |tan| + 1e-6), starting from the paraxial chief
+ray (the ray towards the paraxial entrance pupil). Where no real chief ray exists inside
+the lens (strong aberration, edge, TIR) the result is NaN: the end of the valid field.
+The ideal image height is v tan(theta) = |m| Y; ``radial_map`` maps ideal to real heights.
 """
 
 from __future__ import annotations
@@ -256,7 +258,7 @@ def _paraxial_matrix(prescription: Prescription, count: int, z_start: float,
 
 def paraxial(prescription: Prescription) -> Paraxial:
     """
-    Return the paraxial (first-order) data of a prescription.
+    Return the first-order (Gaussian) data of a prescription.
 
     :param prescription: the lens.
     :return: focal length, principal and focal planes (module docstring for the formulas).
@@ -264,6 +266,7 @@ def paraxial(prescription: Prescription) -> Paraxial:
     """
     z_last = float(vertex_z(prescription)[-1])
     a, _, c, d = _paraxial_matrix(prescription, len(prescription.surfaces), 0.0, z_last)
+    a, c, d = float(a), float(c), float(d)
     power = -c
     if not abs(power) >= AFOCAL_POWER_PER_MM:
         raise ValueError(f'the lens is afocal (power {power:.3g} /mm ~ 0): it has no focal '

@@ -51,8 +51,9 @@ def random_pixels(encoding: str, height: int = 7, width: int = 5) -> np.ndarray:
     """Return seeded random pixels of the encoding's dtype and channel count."""
     enc = ENCODINGS[encoding]
     rng = np.random.default_rng(RNG_SEED)
-    shape: tuple[int, ...] = (height, width) if enc.channels == 1 else (height, width,
-                                                                         enc.channels)
+    shape: tuple[int, ...] = (height, width)
+    if enc.channels > 1:
+        shape = (height, width, enc.channels)
     if enc.dtype == np.float32:
         return rng.uniform(0.2, 10.0, shape).astype(np.float32)
     return rng.integers(0, np.iinfo(enc.dtype).max, shape, endpoint=True).astype(enc.dtype)

@@ -54,6 +54,7 @@ import math
 import os
 from pathlib import Path
 import platform
+import re
 import sys
 import time
 from typing import Any
@@ -102,12 +103,12 @@ THICK_LENSES = (
 COOKE_PIXEL_UM = 5.0
 
 
+_T0 = time.monotonic()
+
+
 def log(msg: str) -> None:
     """Print a progress line to stderr, with the elapsed time."""
     print(f'[{time.monotonic() - _T0:6.1f} s] {msg}', file=sys.stderr, flush=True)
-
-
-_T0 = time.monotonic()
 
 
 def thick_lens_closed_form(n: float, r1: float, r2: float, t: float,
@@ -375,7 +376,7 @@ def curve_and_aiming(lens, tan_max: float, finite: bool, l_mm: float, v: float,
         'real_height_mm': lst(it['y_img']),
         'real_height_abs_mm': lst(np.abs(it['y_img'])),
         'stop_height_mm': lst(it['y_stop']),
-        'max_chief_height_at_surface_mm': lst(it['r_surf'][1:-1].max(axis=1)),
+        'max_chief_height_at_optiland_surface_mm': lst(it['r_surf'][1:-1].max(axis=1)),
     }
     aiming = {
         'mode': 'iterative',
@@ -421,17 +422,15 @@ def grid(lens, l_mm: float, v: float, sens: dict[str, Any], field_max: float) ->
         'nx': GRID_NX, 'ny': GRID_NY, 'coverage': GRID_COVERAGE,
         'order': 'row-major: y (rows, ny) outer, x (columns, nx) inner',
         'object_x_mm': lst(obj_x), 'object_y_mm': lst(obj_y),
-        'tan_x': lst(obj_x / l_mm), 'tan_y': lst(obj_y / l_mm),
         'ideal_x_mm': lst(xi), 'ideal_y_mm': lst(yi),
         'real_x_mm': lst(r['x_img']), 'real_y_mm': lst(r['y_img']),
-        'stop_x_mm': lst(r['x_stop']), 'stop_y_mm': lst(r['y_stop']),
         'max_stop_residual_mm': float(np.max(np.hypot(r['x_stop'], r['y_stop']))),
         'skew_vs_meridional_max_abs_mm': float(sym),
     }
 
 
 def thick_lens_entry(spec: tuple) -> tuple[dict, dict]:
-    """Reference entry and grid of one thick lens."""
+    """Return the reference entry and the grid of one thick lens."""
     key, desc, n, r1, r2, t, m_a, ap, l_mm, sensor = spec
     sens = sensor_info(sensor)
     cf = thick_lens_closed_form(n, r1, r2, t, l_mm)
@@ -446,7 +445,10 @@ def thick_lens_entry(spec: tuple) -> tuple[dict, dict]:
     if curve['real_height_abs_mm'][-1] <= sens['corner_radius_mm']:
         raise RuntimeError(f'{key}: the curve does not reach the sensor corner')
     g = grid(lens, l_mm, par['image_distance_mm'], sens, field_max)
-    # rim: where the two spheres meet (for the record; no surface is clipped)
+    closed_form_rel = max(abs(par[k] - v) / max(abs(v), 1.0) for k, v in cf.items())
+    if closed_form_rel > 1e-12:
+        raise RuntimeError(f'{key}: optiland paraxial data and the closed forms differ by '
+                           f'{closed_form_rel:.2e}')
     entry = {
         'description': desc,
         'kind': 'thick_lens',
@@ -461,6 +463,7 @@ def thick_lens_entry(spec: tuple) -> tuple[dict, dict]:
         'optiland_surfaces': optiland_surface_table(lens, first_z, rows),
         'paraxial': par,
         'closed_form': cf,
+        'closed_form_max_rel_difference': closed_form_rel,
         'optiland_image_solve_shift_mm': moved,
         'curve': curve,
         'aiming': aiming,
@@ -469,7 +472,7 @@ def thick_lens_entry(spec: tuple) -> tuple[dict, dict]:
 
 
 def optiland_surface_table(lens, first_z: float, rows: list[dict[str, Any]]) -> list[dict]:
-    """The optiland model as built: object, lens rows (dummy stop included), image."""
+    """Return the optiland model as built: object, lens rows (dummy stop included), image."""
     z = [float(s.geometry.cs.z) for s in lens.surfaces]
     shift = first_z - z[1]
     table = []
@@ -489,7 +492,7 @@ def optiland_surface_table(lens, first_z: float, rows: list[dict[str, Any]]) -> 
 
 
 def cooke_entry() -> dict:
-    """Reference entry of the fixed-index Cooke triplet (object at infinity)."""
+    """Return the reference entry of the fixed-index Cooke triplet (object at infinity)."""
     lens, rows, glasses = build_cooke()
     moved = image_solve_check(lens)
     lens.updater.image_solve()                   # sensor at the paraxial back focal plane
@@ -503,7 +506,8 @@ def cooke_entry() -> dict:
     curve, aiming = curve_and_aiming(lens, tan_max, False, math.inf, par['efl_mm'],
                                      field_max, COOKE_PIXEL_UM)
     presc = our_prescription(rows, z[stop_index], semi)
-    if max(curve['max_chief_height_at_surface_mm'][i] - semi[i] for i in range(len(semi))) > 0:
+    heights = curve['max_chief_height_at_optiland_surface_mm']
+    if any(h > s for h, s in zip(heights, semi)):
         raise RuntimeError('cooke: a chief ray exceeds a paraxial semi-aperture')
     return {
         'description': 'optiland.samples.objectives.CookeTriplet, glasses fixed at their index '
@@ -525,6 +529,14 @@ def cooke_entry() -> dict:
         'curve': curve,
         'aiming': aiming,
     }
+
+
+def dumps(doc: dict[str, Any]) -> str:
+    """Serialise to JSON with every list of numbers on one line (exact float repr, no NaN)."""
+    text = json.dumps(doc, indent=1, allow_nan=False)
+    number = r'-?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?'
+    flat = re.compile(r'\[\s*(' + number + r'(?:,\s*' + number + r')*)\s*\]')
+    return flat.sub(lambda m: '[' + re.sub(r',\s*', ', ', m.group(1)) + ']', text) + '\n'
 
 
 def versions() -> dict[str, str]:
@@ -593,11 +605,12 @@ def main(argv: list[str] | None = None) -> int:
                     '0; stop_surface the 0-based surface index when the stop is a lens surface',
             'tan_field': 'Y / l for a finite object (Y object height, l from H); tan(theta) at '
                          'infinity',
-            'rho_ideal_mm': 'paraxial image distance v (from H\') times tan_field',
+            'rho_ideal_mm': "paraxial image distance v (from H') times tan_field",
             'real_height_mm': 'chief-ray height on the sensor plane, signed as optiland gives '
                               'it (negative: inverted image)',
-            'grids': 'ideal_* = v * tan (same sign as the object point); real_* as optiland '
-                     'gives them (inverted)',
+            'grids': 'object points (object_x_mm, object_y_mm) on the object plane, tan = '
+                     'object / l; ideal_* = v * tan (same sign as the object point); real_* '
+                     'the chief ray on the sensor plane as optiland gives it (inverted)',
             'aiming': 'optiland iterative ray aiming; stop residuals re-measured from the '
                       'traced surface intersections',
         },
@@ -606,7 +619,7 @@ def main(argv: list[str] | None = None) -> int:
         'grids': grids,
     }
     args.output.parent.mkdir(parents=True, exist_ok=True)
-    args.output.write_text(json.dumps(doc, indent=1) + '\n')
+    args.output.write_text(dumps(doc))
     log(f'wrote {args.output} ({args.output.stat().st_size / 1024:.0f} KiB)')
     return 0
 

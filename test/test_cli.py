@@ -1,0 +1,119 @@
+# Copyright 2026 The mechdeconv_ros Authors.
+# SPDX-License-Identifier: Apache-2.0
+"""The mechdeconv command line: outputs, JSON keys, exit codes, one-line errors."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+from numpy.testing import assert_allclose
+import pytest
+import yaml
+
+from mechdeconv_ros.cli import main
+from mechdeconv_ros.model import build_model
+
+ROOT = Path(__file__).resolve().parents[1]
+CASE2 = str(ROOT / 'config' / 'case2.yaml')
+
+
+def run(capsys, *argv):
+    status = main(list(argv))
+    out, err = capsys.readouterr()
+    return status, out, err
+
+
+def test_info_json_has_every_documented_key(capsys):
+    status, out, _ = run(capsys, 'info', '--params', CASE2, '--json')
+    assert status == 0
+    report = json.loads(out)
+    for key in ('focal_length_mm', 'focal_length_sigma_mm', 'image_distance_mm', 'f_number',
+                'hyperfocal_mm', 'K', 'D', 'distortion_model', 'P', 'fit_rms_px',
+                'max_displacement_px'):
+        assert key in report, key
+    assert set(report['fov_deg']) == {'horizontal', 'vertical', 'diagonal'}
+    assert set(report['depth_of_field_mm']) == {'near', 'far'}
+    assert set(report['feature_resolution_mm']) == {'x', 'y'}
+    assert set(report['footprint_mm']) == {'x', 'y'}
+    curve = report['distortion_curve']
+    assert len(curve['ideal_height_mm']) == len(curve['real_height_mm']) > 100
+    assert_allclose(report['K'], build_model({'sensor.width_px': 640,
+                                              'sensor.height_px': 480}).K)
+
+
+def test_info_text_and_size_override(capsys):
+    status, out, _ = run(capsys, 'info', '--params', CASE2, '--width', '1280', '--height', '720')
+    assert status == 0
+    assert '1280x720 px' in out and 'f = 4.43' in out
+
+
+def test_camera_info_yaml(capsys):
+    status, out, _ = run(capsys, 'camera-info', '--params', CASE2, '-p',
+                         'lens.stop_offset_mm=0.5')
+    assert status == 0
+    data = yaml.safe_load(out)
+    expected = build_model({'sensor.width_px': 640, 'sensor.height_px': 480,
+                            'lens.stop_offset_mm': 0.5})
+    assert_allclose(data['distortion_coefficients']['data'], expected.D)
+
+
+def test_correct_file_and_folder(tmp_path, capsys):
+    image = np.full((480, 640, 3), 200, np.uint8)
+    cv2.imwrite(str(tmp_path / 'a.png'), image)
+    cv2.imwrite(str(tmp_path / 'b.png'), image)
+    status, _, _ = run(capsys, 'correct', '--params', CASE2, str(tmp_path / 'a.png'),
+                       str(tmp_path / 'out.png'))
+    assert status == 0
+    assert cv2.imread(str(tmp_path / 'out.png')).shape == (480, 640, 3)
+    folder = tmp_path / 'in'
+    folder.mkdir()
+    for name in ('a.png', 'b.png'):
+        (tmp_path / name).rename(folder / name)
+    status, _, err = run(capsys, 'correct', '--params', CASE2, str(folder),
+                         str(tmp_path / 'outdir'))
+    assert status == 0
+    assert sorted(p.name for p in (tmp_path / 'outdir').iterdir()) == ['a.png', 'b.png']
+    assert 'correcting' in err  # the progress bar
+
+
+def test_plot_writes_a_png(tmp_path, capsys):
+    out = tmp_path / 'plot.png'
+    status, _, _ = run(capsys, 'plot', '--params', CASE2, str(out))
+    assert status == 0
+    image = cv2.imread(str(out))
+    assert image is not None and image.shape[0] > 500
+
+
+@pytest.mark.parametrize('argv, words', [
+    (['info', '--params', CASE2, '-p', 'scene.distance_mm=3.0'], 'scene.distance_mm'),
+    (['info', '--params', CASE2, '-p', 'lens.r2_mm=4.0', '-p', 'lens.thickness_mm=0.0'],
+     'afocal'),
+    (['info', '--params', CASE2, '-p', 'sensor.pixel_size_x_um=-2.0'], 'sensor.pixel_size_x_um'),
+    (['info', '--params', '/nonexistent.yaml'], '--params'),
+    (['info', '--params', CASE2, '--width', '0'], '--width'),
+    (['info'], 'image size is unknown'),
+    (['correct', '--params', CASE2, '/nonexistent.png', 'x.png'], 'no such file'),
+], ids=['scene-inside-f', 'afocal', 'negative-pixel', 'missing-file', 'zero-width',
+        'no-size', 'missing-image'])
+def test_bad_input_is_one_line_and_status_2(argv, words):
+    proc = subprocess.run([sys.executable, '-m', 'mechdeconv_ros.cli', *argv],
+                          capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert proc.returncode == 2
+    assert 'Traceback' not in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+    assert words in proc.stderr
+
+
+def test_unreadable_image(tmp_path):
+    bad = tmp_path / 'bad.png'
+    bad.write_text('not an image')
+    proc = subprocess.run([sys.executable, '-m', 'mechdeconv_ros.cli', 'correct', '--params',
+                           CASE2, str(bad), str(tmp_path / 'o.png')],
+                          capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert proc.returncode == 2
+    assert 'not a readable image' in proc.stderr

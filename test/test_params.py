@@ -1,0 +1,103 @@
+# Copyright 2026 The mechdeconv_ros Authors.
+# SPDX-License-Identifier: Apache-2.0
+"""The parameter schema: defaults, coercion, params files."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+
+from mechdeconv_ros import params
+
+CONFIG = Path(__file__).resolve().parents[1] / 'config'
+
+
+def test_schema_is_consistent():
+    names = [spec.name for spec in params.SCHEMA]
+    assert len(names) == len(set(names))
+    for spec in params.SCHEMA:
+        assert spec.type in ('double', 'integer', 'string', 'bool', 'double_array')
+        assert spec.description.endswith('.'), spec.name
+        # Every default passes its own checks.
+        assert params.coerce(spec, spec.default) == spec.default
+        if spec.minimum is not None and spec.maximum is not None:
+            assert spec.minimum < spec.maximum
+
+
+def test_issue_contract_names_are_declared():
+    contract = '''lens.refractive_index lens.r1_mm lens.r2_mm lens.thickness_mm
+    lens.aperture_diameter_mm lens.stop_offset_mm lens.focal_length_mm lens.exposure_constant_q
+    lens.tolerance.r1_mm lens.tolerance.r2_mm lens.tolerance.thickness_mm
+    lens.tolerance.refractive_index lens.tolerance.aperture_diameter_mm
+    lens.surfaces.radius_mm lens.surfaces.thickness_mm lens.surfaces.refractive_index
+    lens.surfaces.semi_diameter_mm lens.stop_surface sensor.pixel_size_x_um
+    sensor.pixel_size_y_um sensor.width_px sensor.height_px scene.distance_mm
+    scene.focus_distance_mm scene.circle_of_confusion_mm output.alpha output.interpolation
+    output.width_px output.height_px'''.split()
+    assert set(contract) <= set(params.SPECS)
+    assert set(contract) == set(params.MODEL_PARAMS)
+
+
+@pytest.mark.parametrize('name, value, expected', [
+    ('lens.r1_mm', 5, 5.0),
+    ('sensor.width_px', 640.0, 640),
+    ('output.interpolation', 'cubic', 'cubic'),
+    ('lens.surfaces.radius_mm', (1, 2.5), [1.0, 2.5]),
+    ('lazy_subscription', False, False),
+], ids=['int-for-double', 'whole-float-for-int', 'choice', 'tuple-array', 'bool'])
+def test_coerce_accepts(name, value, expected):
+    assert params.coerce(params.SPECS[name], value) == expected
+
+
+@pytest.mark.parametrize('name, value, words', [
+    ('lens.r1_mm', math.inf, 'finite'),
+    ('lens.r1_mm', 'four', 'expected a number'),
+    ('lens.r1_mm', True, 'expected a number'),
+    ('lens.refractive_index', 0.9, 'below the minimum 1'),
+    ('sensor.width_px', 640.5, 'integer'),
+    ('output.interpolation', 'area', 'one of nearest, linear, cubic, lanczos4'),
+    ('lens.surfaces.radius_mm', [1.0, math.nan], 'lens.surfaces.radius_mm[1]'),
+    ('lazy_subscription', 1, 'true or false'),
+], ids=['inf', 'string', 'bool-for-double', 'below-range', 'fraction', 'choice',
+        'nan-in-array', 'int-for-bool'])
+def test_coerce_refuses_with_the_name(name, value, words):
+    with pytest.raises(ValueError) as info:
+        params.coerce(params.SPECS[name], value)
+    assert str(info.value).startswith(name)
+    assert words in str(info.value)
+
+
+def test_unknown_names_are_refused():
+    with pytest.raises(ValueError, match='unknown parameter'):
+        params.check_values({'lens.r3_mm': 1.0})
+
+
+@pytest.mark.parametrize('path', sorted(CONFIG.glob('*.yaml')), ids=lambda p: p.name)
+def test_config_files_load(path):
+    values = params.load_params_file(path)
+    assert set(values) == set(params.SPECS)
+    text = path.read_text()
+    assert text.lstrip().startswith('#'), 'config files record their source in a comment'
+
+
+def test_params_yaml_round_trip(tmp_path):
+    values = params.defaults()
+    values['lens.surfaces.radius_mm'] = [10.0, -10.0]
+    path = tmp_path / 'p.yaml'
+    path.write_text(params.to_params_yaml(values))
+    assert params.load_params_file(path) == values
+
+
+def test_params_file_sections(tmp_path):
+    path = tmp_path / 'p.yaml'
+    path.write_text('/**:\n  ros__parameters:\n    lens: {r1_mm: 5.0}\n'
+                    'correct_node:\n  ros__parameters:\n    lens: {r2_mm: -6.0}\n'
+                    'other:\n  ros__parameters:\n    lens: {thickness_mm: 9.0}\n')
+    values = params.load_params_file(path)
+    assert (values['lens.r1_mm'], values['lens.r2_mm'], values['lens.thickness_mm']) == \
+        (5.0, -6.0, 3.0)
+    path.write_text('just: text\n')
+    with pytest.raises(ValueError, match='ros__parameters'):
+        params.load_params_file(path)
