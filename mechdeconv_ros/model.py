@@ -150,7 +150,19 @@ class LensModel:
     fit_rms_px: float
     max_displacement_px: float
     interpolation: int
-    summary: dict[str, Any] = field(default_factory=dict)
+    _summary_cache: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
+
+    @property
+    def summary(self) -> dict[str, Any]:
+        """
+        Return the scene constraints and tolerance sigmas (eq. 9-25), computed on first use.
+
+        They cost a few extra traces (tolerance propagation), so a model built to validate a
+        parameter set or to correct frames does not pay for them until someone asks.
+        """
+        if not self._summary_cache:
+            self._summary_cache.update(_summary(self))
+        return self._summary_cache
 
     @property
     def P(self) -> FloatArray:  # noqa: N802 - the ROS CameraInfo field name
@@ -495,7 +507,6 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0) -> L
         K=K, K_new=K_new, D=D, distortion_model=dist_model, fit_rms_px=rms,
         max_displacement_px=max_disp,
         interpolation=CV_INTERPOLATION[str(vals['output.interpolation'])])
-    model.summary.update(_summary(model, vals, distance, edge_real))
     return model
 
 
@@ -556,9 +567,12 @@ def _with(values: Mapping[str, Any], scalars: Mapping[str, float]) -> dict[str, 
     return out
 
 
-def _summary(model: LensModel, vals: Mapping[str, Any], distance: float,
-             edge_real: float) -> dict[str, Any]:
+def _summary(model: LensModel) -> dict[str, Any]:
     """Derive the scene constraints (eq. 9-25) and the tolerance sigmas."""
+    vals = model.values
+    distance = _scene_distance(vals)
+    edge_real = math.hypot(model.width / 2.0 * model.pixel_mm[0],
+                           model.height / 2.0 * model.pixel_mm[1])
     f = model.focal_length_mm
     nominal, sigmas = _tolerance_keys(vals)
 

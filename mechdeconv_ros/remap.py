@@ -74,20 +74,28 @@ def build_float_maps(model: LensModel) -> tuple[npt.NDArray[np.float32],
     fx, fy, cx, cy = model.K[0, 0], model.K[1, 1], model.K[0, 2], model.K[1, 2]
     xn = ((np.arange(ow) - model.K_new[0, 2]) / model.K_new[0, 0]).astype(np.float32)
     yn = ((np.arange(oh) - model.K_new[1, 2]) / model.K_new[1, 1]).astype(np.float32)
-    # Output column u and ow-1-u have opposite xn: compute the lower-right quadrant only.
+    # Output column u and ow-1-u have opposite xn (likewise rows): compute the lower-right
+    # quadrant, then mirror it: map_x(ow-1-u) = 2 c_x - map_x(u), and map_y likewise.
     c0, r0 = ow // 2, oh // 2
-    quad = _quadrant_scale(model, xn[c0:], yn[r0:])
-    scale = np.empty((oh, ow), np.float32)
-    scale[r0:, c0:] = quad
-    scale[r0:, :c0] = quad[:, ow - 2 * c0:ow - c0][:, ::-1]
-    scale[:r0, :] = scale[oh - r0:oh][::-1]
+    scale = _quadrant_scale(model, xn[c0:], yn[r0:])
     invalid = scale < 0.0
-    map_x = scale * (xn * np.float32(fx))[None, :]
-    map_x += np.float32(cx)
-    map_y = scale * (yn * np.float32(fy))[:, None]
-    map_y += np.float32(cy)
-    map_x[invalid] = _OUTSIDE
-    map_y[invalid] = _OUTSIDE
+    map_x = np.empty((oh, ow), np.float32)
+    map_y = np.empty((oh, ow), np.float32)
+    quad_x = map_x[r0:, c0:]
+    quad_y = map_y[r0:, c0:]
+    np.multiply(scale, (xn[c0:] * np.float32(fx))[None, :], out=quad_x)
+    quad_x += np.float32(cx)
+    np.multiply(scale, (yn[r0:] * np.float32(fy))[:, None], out=quad_y)
+    quad_y += np.float32(cy)
+    if invalid.any():
+        # Far outside, and still outside after the mirroring (2 c - outside is far beyond).
+        quad_x[invalid] = _OUTSIDE
+        quad_y[invalid] = _OUTSIDE
+    np.subtract(np.float32(2.0 * cx), quad_x[:, ow - 2 * c0:ow - c0][:, ::-1],
+                out=map_x[r0:, :c0])
+    map_y[r0:, :c0] = quad_y[:, ow - 2 * c0:ow - c0][:, ::-1]
+    map_x[:r0] = map_x[oh - r0:oh][::-1]
+    np.subtract(np.float32(2.0 * cy), map_y[oh - r0:oh][::-1], out=map_y[:r0])
     return map_x, map_y
 
 

@@ -1,0 +1,337 @@
+# Copyright 2026 The mechdeconv_ros Authors.
+# SPDX-License-Identifier: Apache-2.0
+"""
+Helpers for the tests that run real ROS 2 processes (no mocks).
+
+* :func:`next_domain_id` gives every node launch of a test run its own ``ROS_DOMAIN_ID``
+  (derived from the pid, so parallel runs on one machine do not see each other), and
+  :func:`ros_env` the environment for it: discovery limited to localhost and the package's
+  Fast DDS profile (big shared-memory segment: large best-effort frames arrive).
+* :class:`NodeProcess` starts a node in its own process group and stops it with SIGINT to its
+  PID, returning the exit code; its context manager kills the group if anything goes wrong,
+  so no process outlives a test.
+* :class:`RosClient` is a client node in the test process, in its own rclpy Context on the
+  same domain: it publishes frames, collects the node's outputs by stamp and calls the
+  parameter services exactly as ``ros2 param set`` does.
+"""
+
+from __future__ import annotations
+
+import array
+import itertools
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import time
+from typing import Any, Callable, Iterator, Sequence
+
+import numpy as np
+import rclpy
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.srv import GetParameters, SetParameters, SetParametersAtomically
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+REPO = Path(__file__).resolve().parents[1]
+FASTDDS_PROFILE = REPO / 'config' / 'fastdds_shm.xml'
+NODE_NAME = 'correct_node'
+
+#: Best effort, keep last: what the node publishes and subscribes with by default.
+BEST_EFFORT = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5,
+                         reliability=ReliabilityPolicy.BEST_EFFORT)
+
+_domain_counter = itertools.count()
+
+
+def next_domain_id() -> int:
+    """
+    Return a ROS_DOMAIN_ID for one node launch: distinct within this run, pid-derived.
+
+    Domains 1-100 are used (all valid for Fast DDS's port mapping with many participants).
+
+    :return: the domain id.
+    """
+    return 1 + (os.getpid() * 7 + next(_domain_counter)) % 100
+
+
+def ros_env(domain_id: int, extra: dict[str, str] | None = None) -> dict[str, str]:
+    """
+    Return the environment of a ROS process of a test.
+
+    :param domain_id: the ROS_DOMAIN_ID.
+    :param extra: more variables (override the rest).
+    :return: a copy of ``os.environ`` with the ROS settings and the repo on PYTHONPATH.
+    """
+    env = dict(os.environ)
+    env.update({
+        'ROS_DOMAIN_ID': str(domain_id),
+        'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
+        'FASTRTPS_DEFAULT_PROFILES_FILE': str(FASTDDS_PROFILE),
+        'PYTHONUNBUFFERED': '1',
+        'RCUTILS_COLORIZED_OUTPUT': '0',
+        'RCUTILS_LOGGING_BUFFERED_STREAM': '0',
+        'PYTHONPATH': os.pathsep.join(
+            [str(REPO)] + [p for p in env.get('PYTHONPATH', '').split(os.pathsep) if p]),
+    })
+    env.pop('ROS_LOCALHOST_ONLY', None)
+    env.update(extra or {})
+    return env
+
+
+def configure_test_process() -> None:
+    """
+    Set the ROS environment of the test process itself (before its first participant).
+
+    Fast DDS reads its profile file once per process, at the first participant, so this must
+    run before any ``rclpy.init`` of the session.
+    """
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    os.environ['FASTRTPS_DEFAULT_PROFILES_FILE'] = str(FASTDDS_PROFILE)
+    os.environ.pop('ROS_LOCALHOST_ONLY', None)
+
+
+class NodeProcess:
+    """A ROS node process in its own process group, stopped by SIGINT to its PID."""
+
+    def __init__(self, argv: Sequence[str], env: dict[str, str], log_dir: Path,
+                 name: str = 'node') -> None:
+        """
+        Start the process.
+
+        :param argv: the command.
+        :param env: its environment.
+        :param log_dir: where ``<name>.out`` and ``<name>.err`` go.
+        :param name: file name stem of the logs.
+        """
+        self.argv = list(argv)
+        self.out_path = log_dir / f'{name}.out'
+        self.err_path = log_dir / f'{name}.err'
+        self._out = open(self.out_path, 'wb')
+        self._err = open(self.err_path, 'wb')
+        self.proc = subprocess.Popen(self.argv, env=env, stdout=self._out, stderr=self._err,
+                                     stdin=subprocess.DEVNULL, start_new_session=True)
+        self.returncode: int | None = None
+
+    @property
+    def pid(self) -> int:
+        """Return the process id (also its process group id)."""
+        return self.proc.pid
+
+    def running(self) -> bool:
+        """Return True while the process runs."""
+        return self.proc.poll() is None
+
+    def stop(self, sig: int = signal.SIGINT, timeout: float = 15.0) -> int:
+        """
+        Send ``sig`` to the PID and wait for the exit; kill the group after ``timeout``.
+
+        :param sig: the signal (SIGINT, as Ctrl-C in ``ros2 run``).
+        :param timeout: seconds to wait.
+        :return: the exit code (negative: killed by a signal).
+        """
+        if self.proc.poll() is None:
+            os.kill(self.proc.pid, sig)
+            try:
+                self.proc.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                self.kill()
+        self.returncode = self.proc.wait()
+        self._close()
+        return self.returncode
+
+    def kill(self) -> None:
+        """Kill the whole process group (its children too), now."""
+        try:
+            os.killpg(self.proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        self.proc.wait()
+        self._close()
+
+    def _close(self) -> None:
+        for stream in (self._out, self._err):
+            if not stream.closed:
+                stream.close()
+
+    def output(self) -> str:
+        """Return everything the process wrote so far (stdout then stderr)."""
+        self._out.flush()
+        self._err.flush()
+        return (self.out_path.read_text(errors='replace') + '\n'
+                + self.err_path.read_text(errors='replace'))
+
+    def __enter__(self) -> NodeProcess:
+        """Return self."""
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        """Make sure nothing outlives the block."""
+        if self.proc.poll() is None:
+            self.kill()
+        self._close()
+
+
+def node_command(params_file: Path | None, *overrides: str,
+                 executable: Sequence[str] | None = None) -> list[str]:
+    """
+    Return the command that runs correct_node with a params file and ``-p`` overrides.
+
+    :param params_file: the ``--params-file`` (None: none).
+    :param overrides: ``name:=value`` strings.
+    :param executable: the program (default: ``python -m mechdeconv_ros.correct_node``).
+    :return: argv.
+    """
+    argv = list(executable or [sys.executable, '-m', 'mechdeconv_ros.correct_node'])
+    argv.append('--ros-args')
+    if params_file is not None:
+        argv += ['--params-file', str(params_file)]
+    for item in overrides:
+        argv += ['-p', item]
+    return argv
+
+
+def stamp_of(msg: Any) -> tuple[int, int]:
+    """Return ``(sec, nanosec)`` of a message's header."""
+    return int(msg.header.stamp.sec), int(msg.header.stamp.nanosec)
+
+
+def make_image(pixels: np.ndarray, encoding: str, *, pad: int = 0, bigendian: bool = False,
+               frame_id: str = 'test_optical_frame') -> Any:
+    """
+    Build a sensor_msgs/Image holding ``pixels``, optionally row-padded or big-endian.
+
+    :param pixels: ``(H, W)`` or ``(H, W, C)``, native byte order.
+    :param encoding: the encoding name.
+    :param pad: extra bytes at the end of every row.
+    :param bigendian: store multi-byte values big-endian and set ``is_bigendian``.
+    :param frame_id: the header's frame_id.
+    :return: the message (stamp unset).
+    """
+    from sensor_msgs.msg import Image
+    height, width = pixels.shape[:2]
+    stored = pixels.astype(pixels.dtype.newbyteorder('>' if bigendian else '<'))
+    rows = np.ascontiguousarray(stored).reshape(height, -1).view(np.uint8)
+    padded = np.full((height, rows.shape[1] + pad), 0xAB, np.uint8)
+    padded[:, :rows.shape[1]] = rows
+    msg = Image()
+    msg.header.frame_id = frame_id
+    msg.width, msg.height, msg.encoding = width, height, encoding
+    msg.step = padded.shape[1]
+    msg.is_bigendian = int(bigendian)
+    msg.data = array.array('B', padded.tobytes())
+    return msg
+
+
+class RosClient:
+    """A client node in the test process: publishes frames, collects outputs, sets params."""
+
+    def __init__(self, domain_id: int, name: str = 'test_client',
+                 node_name: str = NODE_NAME) -> None:
+        """
+        Create the context, the node and the parameter clients of ``node_name``.
+
+        :param domain_id: the ROS_DOMAIN_ID of the node under test.
+        :param name: this client's node name.
+        :param node_name: the node under test.
+        """
+        configure_test_process()
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain_id)
+        self.node = Node(name, context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self._set = self.node.create_client(SetParameters, f'/{node_name}/set_parameters')
+        self._set_atomic = self.node.create_client(
+            SetParametersAtomically, f'/{node_name}/set_parameters_atomically')
+        self._get = self.node.create_client(GetParameters, f'/{node_name}/get_parameters')
+        self._stamps = itertools.count(1)
+
+    def close(self) -> None:
+        """Destroy the node and shut the context down."""
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+    def __enter__(self) -> RosClient:
+        """Return self."""
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        """Close."""
+        self.close()
+
+    def spin_until(self, predicate: Callable[[], bool], timeout: float,
+                   poll: float = 0.02) -> bool:
+        """
+        Spin until ``predicate()`` is true or ``timeout`` seconds pass.
+
+        :return: the last value of the predicate.
+        """
+        deadline = time.monotonic() + timeout
+        while not predicate():
+            if time.monotonic() > deadline:
+                return predicate()
+            self.executor.spin_once(timeout_sec=poll)
+        return True
+
+    def spin_for(self, seconds: float) -> None:
+        """Spin for a while (to let messages arrive)."""
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            self.executor.spin_once(timeout_sec=min(0.05, max(0.0, deadline - time.monotonic())))
+
+    def next_stamp(self, msg: Any) -> tuple[int, int]:
+        """Give ``msg`` a fresh, unique header stamp and return it."""
+        sec = next(self._stamps)
+        msg.header.stamp.sec = sec
+        msg.header.stamp.nanosec = 1000 * sec
+        return stamp_of(msg)
+
+    def call(self, client: Any, request: Any, timeout: float = 10.0) -> Any:
+        """Call a service and return its response (fails the test on a timeout)."""
+        assert client.wait_for_service(timeout_sec=timeout), f'{client.srv_name} not available'
+        future = client.call_async(request)
+        assert self.spin_until(future.done, timeout), f'{client.srv_name} did not answer'
+        return future.result()
+
+    def set_parameters(self, *params: Parameter) -> list[Any]:
+        """
+        Set parameters one by one through ``set_parameters``, as ``ros2 param set`` does.
+
+        :return: one SetParametersResult per parameter.
+        """
+        request = SetParameters.Request(parameters=[p.to_parameter_msg() for p in params])
+        return list(self.call(self._set, request).results)
+
+    def set_parameters_atomically(self, *params: Parameter) -> Any:
+        """Set parameters together through ``set_parameters_atomically``; return the result."""
+        request = SetParametersAtomically.Request(
+            parameters=[p.to_parameter_msg() for p in params])
+        return self.call(self._set_atomic, request).result
+
+    def get_parameters(self, *names: str) -> dict[str, Any]:
+        """Return the current values of parameters of the node under test."""
+        response = self.call(self._get, GetParameters.Request(names=list(names)))
+        return {name: Parameter.from_parameter_msg(ParameterMsg(name=name, value=value)).value
+                for name, value in zip(names, response.values)}
+
+
+def wait_for(predicate: Callable[[], bool], timeout: float, poll: float = 0.05) -> bool:
+    """Poll ``predicate`` without spinning; return its last value."""
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            return predicate()
+        time.sleep(poll)
+    return True
+
+
+def iter_chunks(items: Sequence[Any], size: int) -> Iterator[Sequence[Any]]:
+    """Yield consecutive slices of ``items`` of length ``size``."""
+    for start in range(0, len(items), size):
+        yield items[start:start + size]
