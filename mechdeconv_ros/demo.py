@@ -22,7 +22,7 @@
    checks that they exit with status 0.
 
 Ctrl-C at any time stops the children and exits 130. Options: ``--seconds`` (each measuring
-window, default 6; also ``MECHDECONV_DEMO_SECONDS``), ``--out`` (default ``demo_out``),
+window, default 10; also ``MECHDECONV_DEMO_SECONDS``), ``--out`` (default ``demo_out``),
 ``--stop-offset``/``--thickness`` (the new lens), ``--domain-id``.
 """
 
@@ -244,7 +244,7 @@ def make_monitor(rclpy_node_cls: Any) -> Any:
                                      qos_profile_sensor_data)
             self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag,
                                      qos_profile_sensor_data)
-            self.clients = {
+            self.param_clients = {
                 name: self.create_client(SetParametersAtomically,
                                          f'/{name}/set_parameters_atomically')
                 for name in ('correct_node', 'demo_camera')}
@@ -306,7 +306,7 @@ def make_monitor(rclpy_node_cls: Any) -> Any:
 
             :return: (SetParametersResult, request monotonic s, reply monotonic s).
             """
-            client = self.clients[node]
+            client = self.param_clients[node]
             if not client.wait_for_service(timeout_sec=timeout_s):
                 raise DemoError(f'/{node}/set_parameters_atomically is not available')
             request = SetParametersAtomically.Request()
@@ -421,8 +421,8 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         prog='python -m mechdeconv_ros.demo',
         description='Run correct_node and a simulated camera, change the lens live, measure.')
     parser.add_argument('--seconds', type=float,
-                        default=float(os.environ.get('MECHDECONV_DEMO_SECONDS', '6')),
-                        help='length of each measuring window (default 6 s; '
+                        default=float(os.environ.get('MECHDECONV_DEMO_SECONDS', '10')),
+                        help='length of each measuring window (default 10 s; '
                              'env MECHDECONV_DEMO_SECONDS)')
     parser.add_argument('--out', type=Path, default=Path('demo_out'),
                         help='folder for the PNGs and the process logs (default demo_out)')

@@ -220,6 +220,11 @@ class DemoCamera(Node):
                 # An empty list would be declared as a BYTE_ARRAY: declare the type instead.
                 default = Parameter.Type.DOUBLE_ARRAY
             self.declare_parameter(spec.name, default, descriptor_for(spec))
+        unset = [Parameter(spec.name, Parameter.Type.DOUBLE_ARRAY, [])
+                 for spec in camera_specs() if spec.type == 'double_array'
+                 and self.get_parameter_or(spec.name).type_ == Parameter.Type.NOT_SET]
+        if unset:
+            self.set_parameters(unset)
         self._values = self._current_values()
         self._model = self._build(self._values)
         self._chart = Chart(self._model)

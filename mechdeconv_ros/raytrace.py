@@ -64,10 +64,12 @@ z = z_s at height 0. When z_s lies in object space (before the first vertex) it 
 the line through the stop centre. Otherwise it is found by ray aiming: the free parameter
 is the height h at which the object-space ray crosses the first-vertex plane z = 0 (a start
 point near the lens keeps the trace accurate for any l); a vectorised Newton iteration with
-step halving, its derivative by a forward difference in the same stacked trace, drives the
+step control, its derivative by a forward difference in the same stacked trace, drives the
 stop height to |y_s| <= 1e-10 mm x min(1, |tan| + 1e-6), starting from the paraxial chief
-ray (the ray towards the paraxial entrance pupil). Where no real chief ray exists inside
-the lens (strong aberration, edge, TIR) the result is NaN: the end of the valid field.
+ray (the ray towards the paraxial entrance pupil) and keeping the paraxial sign of dy_s/dh,
+i.e. on the branch of solutions that starts on the axis, so the map stays continuous.
+Where that branch ends (it folds back, or its rays leave the lens, miss a surface or are
+totally internally reflected) the result is NaN: the end of the valid field.
 The ideal image height is v tan(theta) = |m| Y; ``radial_map`` maps ideal to real heights.
 """
 
@@ -83,9 +85,12 @@ import numpy as np
 AFOCAL_POWER_PER_MM = 1e-9
 #: Ray aiming converges when |y_stop| <= STOP_TOLERANCE_MM (tighter for small fields).
 STOP_TOLERANCE_MM = 1e-10
-#: Newton iterations and step halvings of the ray aiming.
+#: Newton iterations and step halvings of the ray aiming; halvings of a paraxial start that
+#: fails; consecutive iterations that reduce |y_stop| by less than 10 % before a ray fails.
 MAX_AIM_ITERATIONS = 40
-MAX_STEP_HALVINGS = 30
+MAX_STEP_HALVINGS = 20
+MAX_START_HALVINGS = 12
+STALL_ITERATIONS = 3
 #: A ray that must travel backwards by more than this to reach a surface fails.
 BACKWARD_TOLERANCE_MM = 1e-9
 
@@ -473,39 +478,52 @@ class _ChiefRayProblem:
         if abs(denominator) <= 1e-12 * (abs(numerator) + abs(a) * self.scale):
             raise ValueError('the paraxial entrance pupil is at infinity or on the object '
                              'plane: the chief ray is undefined')
+        # Sign of the paraxial dy_stop/dh: the chief ray lies on the branch that keeps it.
+        self.branch_sign = math.copysign(1.0, denominator)
         return tan * (numerator / denominator)
 
     def value_and_slope(self, height: np.ndarray,
-                        tan: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Return y_stop(h), dy_stop/dh by a forward difference (one stacked trace), h."""
+                        tan: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return y_stop(h) and dy_stop/dh by a forward difference (one stacked trace)."""
         step = np.copysign(1e-7 * (self.scale + np.abs(height)), height)
         both = self.stop_height(np.concatenate((height, height + step)),
                                 np.concatenate((tan, tan)))
         value = both[:height.size]
         with np.errstate(**_ERRSTATE):
-            return value, (both[height.size:] - value) / step, height
+            return value, (both[height.size:] - value) / step
 
 
 def _aim(problem: _ChiefRayProblem, tan: np.ndarray) -> np.ndarray:
-    """Return the heights h at z = 0 of the chief rays (NaN where aiming failed)."""
+    """
+    Return the heights h at z = 0 of the chief rays (NaN where aiming failed).
+
+    Newton on y_stop(h) from the paraxial chief ray. A step is accepted when its ray exists,
+    keeps the paraxial sign of dy_stop/dh (the branch of solutions that starts on the axis)
+    and reduces |y_stop|; otherwise it is halved, or, past a fold of y_stop(h), shortened to
+    the root of the local quadratic model. A ray fails (NaN) when that model shows no root
+    ahead, after STALL_ITERATIONS iterations that each reduce |y_stop| by less than 10 %, or
+    when no step can be accepted: there is no real chief ray (the end of the valid field).
+    """
     tolerance = STOP_TOLERANCE_MM * np.minimum(1.0, np.abs(tan) + 1e-6)
     height = problem.paraxial_height(tan)
+    branch = problem.branch_sign
     with np.errstate(**_ERRSTATE):
         height = np.where(np.isfinite(height), height, np.nan)
-        value, slope, _ = problem.value_and_slope(height, tan)
+        value, slope = problem.value_and_slope(height, tan)
         # A paraxial start that fails (large fields): pull it towards the axis.
-        for _ in range(MAX_STEP_HALVINGS):
-            retry = np.flatnonzero(~(np.isfinite(value) & np.isfinite(slope))
+        for _ in range(MAX_START_HALVINGS):
+            retry = np.flatnonzero(~(np.isfinite(value) & (slope * branch > 0))
                                    & np.isfinite(height))
             if retry.size == 0:
                 break
             height[retry] *= 0.5
-            value[retry], slope[retry], _ = problem.value_and_slope(height[retry], tan[retry])
+            value[retry], slope[retry] = problem.value_and_slope(height[retry], tan[retry])
         result = np.full(tan.shape, np.nan)
-        ok = np.isfinite(value) & np.isfinite(slope)
+        ok = np.isfinite(value) & (slope * branch > 0)
         done = ok & (np.abs(value) <= tolerance)
         result[done] = height[done]
         active = np.flatnonzero(ok & ~done)
+        slow = np.zeros(tan.shape, dtype=int)
         for _ in range(MAX_AIM_ITERATIONS):
             if active.size == 0:
                 break
@@ -519,22 +537,39 @@ def _aim(problem: _ChiefRayProblem, tan: np.ndarray) -> np.ndarray:
                 if pending.size == 0:
                     break
                 trial = h0[pending] + lam[pending] * step[pending]
-                y1, g1, _ = problem.value_and_slope(trial, tan[active[pending]])
-                good = (np.isfinite(y1) & np.isfinite(g1)
+                y1, g1 = problem.value_and_slope(trial, tan[active[pending]])
+                good = (np.isfinite(y1) & (g1 * branch > 0)
                         & ((np.abs(y1) < np.abs(y0[pending]))
                            | (np.abs(y1) <= tolerance[active[pending]])))
                 take = pending[good]
                 accepted[take] = True
                 new_h[take], new_y[take], new_g[take] = trial[good], y1[good], g1[good]
-                pending = pending[~good]
-                lam[pending] *= 0.5
-            # No further decrease possible: accept what meets the contract tolerance.
-            stalled = ~accepted
+                # Past a fold (the slope changed sign): shorten the step to the nearer root
+                # of the quadratic through (y0, g0, g1), or half way to its vertex; else halve.
+                shrink = np.full(pending.size, 0.5)
+                fold = np.isfinite(y1) & np.isfinite(g1) & ~(g1 * branch > 0)
+                length = lam[pending] * step[pending]
+                curvature = (g1 - g0[pending]) / length
+                a0, b0 = y0[pending], g0[pending]
+                disc = b0 * b0 - 2.0 * curvature * a0
+                to_root = -2.0 * a0 / (b0 + np.copysign(np.sqrt(disc), b0))
+                to_vertex = -0.5 * b0 / curvature
+                model = np.where(disc >= 0, to_root, to_vertex) / length
+                model = np.where(np.isfinite(model), np.clip(model, 1e-3, 0.9), 0.5)
+                shrink = np.where(fold, model, shrink)
+                # ... and when that quadratic has no root and y kept its sign, neither has
+                # the branch: no real chief ray (the end of the valid field).
+                hopeless = fold & ~(disc >= 0) & (y1 * a0 > 0)
+                lam[pending] *= shrink
+                pending = pending[~good & ~hopeless]
             finished = accepted & (np.abs(new_y) <= tolerance[active])
-            finished |= stalled & (np.abs(y0) <= STOP_TOLERANCE_MM)
+            # No further decrease possible: accept what meets the contract tolerance.
+            finished |= ~accepted & (np.abs(y0) <= STOP_TOLERANCE_MM)
             result[active[finished]] = new_h[finished]
             height[active], value[active], slope[active] = new_h, new_y, new_g
-            active = active[accepted & ~finished]
+            slow[active] = np.where(np.abs(new_y) > 0.9 * np.abs(y0), slow[active] + 1, 0)
+            keep = accepted & ~finished & (slow[active] < STALL_ITERATIONS)
+            active = active[keep]
         # Out of iterations: keep what meets the contract tolerance.
         close = active[np.abs(value[active]) <= STOP_TOLERANCE_MM]
         result[close] = height[close]

@@ -25,12 +25,12 @@ import signal
 import subprocess
 import sys
 import time
-from typing import Any, Callable, Iterator, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
-import rclpy
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.srv import GetParameters, SetParameters, SetParametersAtomically
+import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -160,8 +160,9 @@ class NodeProcess:
 
     def output(self) -> str:
         """Return everything the process wrote so far (stdout then stderr)."""
-        self._out.flush()
-        self._err.flush()
+        for stream in (self._out, self._err):
+            if not stream.closed:
+                stream.flush()
         return (self.out_path.read_text(errors='replace') + '\n'
                 + self.err_path.read_text(errors='replace'))
 
@@ -308,6 +309,12 @@ class RosClient:
         request = SetParameters.Request(parameters=[p.to_parameter_msg() for p in params])
         return list(self.call(self._set, request).results)
 
+    def set_parameters_async(self, *params: Parameter) -> Any:
+        """Start a ``set_parameters`` call and return its future (spin to complete it)."""
+        assert self._set.wait_for_service(timeout_sec=10.0)
+        return self._set.call_async(
+            SetParameters.Request(parameters=[p.to_parameter_msg() for p in params]))
+
     def set_parameters_atomically(self, *params: Parameter) -> Any:
         """Set parameters together through ``set_parameters_atomically``; return the result."""
         request = SetParametersAtomically.Request(
@@ -319,19 +326,3 @@ class RosClient:
         response = self.call(self._get, GetParameters.Request(names=list(names)))
         return {name: Parameter.from_parameter_msg(ParameterMsg(name=name, value=value)).value
                 for name, value in zip(names, response.values)}
-
-
-def wait_for(predicate: Callable[[], bool], timeout: float, poll: float = 0.05) -> bool:
-    """Poll ``predicate`` without spinning; return its last value."""
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > deadline:
-            return predicate()
-        time.sleep(poll)
-    return True
-
-
-def iter_chunks(items: Sequence[Any], size: int) -> Iterator[Sequence[Any]]:
-    """Yield consecutive slices of ``items`` of length ``size``."""
-    for start in range(0, len(items), size):
-        yield items[start:start + size]

@@ -396,3 +396,19 @@ def test_no_chief_ray_through_the_lens_is_nan():
     heights = rt.trace_chief_rays(lens, 1000.0, sensor_z, np.array([0.1, 0.3, 1.0]))
     assert np.isfinite(heights[0])
     assert np.all(np.isnan(heights[1:]))
+
+
+def test_valid_field_ends_once_where_the_chief_ray_ends():
+    # Same lens: a brute-force scan of y_stop(h) finds a chief ray at tan = 0.2628 and none at
+    # tan = 0.2630 (the ray would have to pass outside the lens). The traced field is
+    # valid up to that edge, without holes, and NaN beyond it.
+    lens = with_stop(case2(), 4.0)
+    sensor_z, _ = rt.image_plane(lens, 1000.0)
+    tan = np.linspace(0.0, 0.45, 2048)
+    heights = rt.trace_chief_rays(lens, 1000.0, sensor_z, tan)
+    valid = np.isfinite(heights)
+    count = int(valid.sum())
+    assert valid[:count].all()
+    assert 0.2628 <= tan[count - 1] < tan[count] <= 0.2630 + np.diff(tan)[0]
+    assert np.all(np.diff(heights[:count]) < 0)
+

@@ -32,12 +32,13 @@ import json
 import math
 from pathlib import Path
 
-from mechdeconv_ros.optics import thick_lens
-from mechdeconv_ros.raytrace import image_plane, paraxial, Prescription, Surface
-from mechdeconv_ros.raytrace import trace_chief_rays
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest
+
+from mechdeconv_ros.optics import thick_lens
+from mechdeconv_ros.raytrace import image_plane, paraxial, Prescription, Surface
+from mechdeconv_ros.raytrace import trace_chief_rays
 
 ROOT = Path(__file__).resolve().parents[1]
 REFERENCE = ROOT / 'test' / 'data' / 'optiland_reference.json'
@@ -69,6 +70,7 @@ def pixel_mm(lens: dict) -> float:
 
 
 def test_provenance():
+    """The reference says what made it and that optiland aimed every chief ray."""
     prov = DATA['provenance']
     assert prov['versions']['optiland'] == '0.6.3'
     assert prov['versions']['numpy']
@@ -92,6 +94,7 @@ def test_provenance():
 
 @pytest.mark.parametrize('key', list(LENSES), ids=list(LENSES))
 def test_paraxial_data(key):
+    """Focal length, image distance, sensor and principal planes agree (1e-6)."""
     lens = LENSES[key]
     ref = lens['paraxial']
     p = prescription(lens)
@@ -114,6 +117,7 @@ def test_paraxial_data(key):
 
 @pytest.mark.parametrize('key', THICK, ids=THICK)
 def test_thick_lens_builds_the_reference_prescription(key):
+    """optics.thick_lens builds the prescription the reference traced."""
     lens = LENSES[key]
     tl = lens['thick_lens']
     p = thick_lens(tl['refractive_index'], tl['r1_mm'], tl['r2_mm'], tl['thickness_mm'],
@@ -139,6 +143,7 @@ def _curve_difference_px(p: Prescription, lens: dict) -> np.ndarray:
 
 @pytest.mark.parametrize('key', list(LENSES), ids=list(LENSES))
 def test_distortion_curve(key, record_property):
+    """Real chief-ray heights agree within 0.01 px over the whole traced field."""
     lens = LENSES[key]
     diff = _curve_difference_px(prescription(lens), lens)
     worst = float(np.max(np.abs(diff)))
@@ -154,6 +159,7 @@ def test_distortion_curve(key, record_property):
 
 @pytest.mark.parametrize('key', THICK, ids=THICK)
 def test_distortion_curve_via_thick_lens(key):
+    """The same through the product's thick-lens builder."""
     tl = LENSES[key]['thick_lens']
     p = thick_lens(tl['refractive_index'], tl['r1_mm'], tl['r2_mm'], tl['thickness_mm'],
                    tl['stop_offset_mm'], tl['aperture_diameter_mm'])
@@ -162,6 +168,7 @@ def test_distortion_curve_via_thick_lens(key):
 
 @pytest.mark.parametrize('key', THICK, ids=THICK)
 def test_grid_of_skew_points(key, record_property):
+    """Optiland's skew (x, y) grid points agree with our meridional trace turned."""
     lens = LENSES[key]
     grid = DATA['grids'][key]
     p = prescription(lens)
@@ -269,6 +276,7 @@ def _hand_chief_height(lens: dict, tan: float) -> float:
 @pytest.mark.parametrize('key', ['case2', 'case1', 'case2_t5', 'cooke_triplet'],
                          ids=['case2', 'case1', 'case2_t5', 'cooke_triplet'])
 def test_reference_against_hand_snell_trace(key):
+    """A scalar Snell's-law trace written here confirms reference values."""
     lens = LENSES[key]
     curve = lens['curve']
     picks = [1, len(curve['tan_field']) // 2, len(curve['tan_field']) - 1]
@@ -281,6 +289,7 @@ def test_reference_against_hand_snell_trace(key):
 
 @pytest.fixture(scope='module')
 def generator():
+    """Load tools/make_optiland_reference.py (skip when optiland is not installed)."""
     pytest.importorskip('optiland')
     spec = importlib.util.spec_from_file_location('make_optiland_reference', GENERATOR)
     module = importlib.util.module_from_spec(spec)
@@ -290,6 +299,7 @@ def generator():
 
 @pytest.mark.parametrize('key', ['case2', 'cooke_triplet'], ids=['case2', 'cooke_triplet'])
 def test_live_optiland_recheck(generator, key):
+    """Optiland re-traces a few reference values live, with iterative aiming."""
     lens = LENSES[key]
     curve = lens['curve']
     picks = np.array([8, 64, len(curve['tan_field']) - 1])
