@@ -23,11 +23,10 @@ from pathlib import Path
 import sys
 from typing import Any, Sequence
 
-import numpy as np
-import yaml
-
 from mechdeconv_ros.model import build_model, camera_info_yaml, LensModel, ModelError
 from mechdeconv_ros.params import check_values, load_params_file, SPECS
+import numpy as np
+import yaml
 
 IMAGE_SUFFIXES = ('.png', '.jpg', '.jpeg', '.bmp', '.tif', '.tiff', '.pgm', '.ppm')
 
@@ -231,4 +230,3 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 if __name__ == '__main__':
     sys.exit(main())
-

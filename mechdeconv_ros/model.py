@@ -37,16 +37,15 @@ from dataclasses import dataclass, field
 import math
 from typing import Any, Mapping
 
-import numpy as np
-import numpy.typing as npt
-import yaml
-
 from mechdeconv_ros import constraints
 from mechdeconv_ros.optics import biconvex_for_focal_length, propagate_sigma, thick_lens
 from mechdeconv_ros.params import (
     check_values, INTERPOLATIONS, MAX_FRAME_PIXELS, ParamValue)
 from mechdeconv_ros.raytrace import (
     image_plane, paraxial, Prescription, Surface, trace_chief_rays, vertex_z)
+import numpy as np
+import numpy.typing as npt
+import yaml
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -593,11 +592,11 @@ def _summary(model: LensModel) -> dict[str, Any]:
         scal = dict(p)
         f_p = efl({k: v for k, v in scal.items() if k != 'd_a'})
         n_fp = constraints.f_number(f_p, scal['d_a'], q)
-        return constraints.hyperfocal_mm(f_p, n_fp, constraints.circle_of_confusion_mm(f_p,
-                                                                                      c_set))
+        c_p = constraints.circle_of_confusion_mm(f_p, c_set)
+        return constraints.hyperfocal_mm(f_p, n_fp, c_p)
 
-    sigma_h = propagate_sigma(hyper, {**nominal, 'd_a': d_a},
-                              {**sigmas, 'd_a': float(vals['lens.tolerance.aperture_diameter_mm'])})
+    sigma_d_a = float(vals['lens.tolerance.aperture_diameter_mm'])
+    sigma_h = propagate_sigma(hyper, {**nominal, 'd_a': d_a}, {**sigmas, 'd_a': sigma_d_a})
     focus = float(vals['scene.focus_distance_mm']) or distance
     focus = math.inf if focus == 0.0 else focus
     near, far = constraints.depth_of_field_mm(h, focus)
@@ -669,7 +668,6 @@ def _corner_sigma_px(model: LensModel, vals: Mapping[str, Any], nominal: Mapping
     except (ValueError, ModelError):
         return math.nan
     return float(sigma_mm / min(model.pixel_mm))
-
 
 
 def camera_info_yaml(model: LensModel, camera_name: str = 'mechdeconv') -> str:

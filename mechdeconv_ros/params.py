@@ -46,7 +46,7 @@ class ParamSpec:
     """
 
     name: str
-    type: str
+    type: str  # noqa: A003 - the ROS parameter type name
     default: ParamValue
     unit: str
     description: str

@@ -12,9 +12,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 from mechdeconv_ros.model import LensModel
+import numpy as np
 
 
 def grid_image(width: int, height: int, cells_x: int = 20, cells_y: int = 18,
@@ -96,7 +95,7 @@ def plot_model(model: LensModel, path: Path) -> None:
         ax.imshow(image, cmap='gray', interpolation='nearest')
         ax.set_title(title)
         ax.set_axis_off()
-    fig.suptitle(f"f = {model.focal_length_mm:.4g} mm, stop offset "
+    fig.suptitle(f'f = {model.focal_length_mm:.4g} mm, stop offset '
                  f"{model.values['lens.stop_offset_mm']:g} mm, scene "
                  f"{model.values['scene.distance_mm'] or 'inf'} mm, "
                  f'{model.width}x{model.height} px')

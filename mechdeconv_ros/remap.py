@@ -24,10 +24,9 @@ bilinear remap on our machines, and a nearest-neighbour CV_16SC2 map is kept for
 from __future__ import annotations
 
 import cv2
+from mechdeconv_ros.model import LensModel
 import numpy as np
 import numpy.typing as npt
-
-from mechdeconv_ros.model import LensModel
 
 #: Where invalid output pixels point: far enough outside any source for BORDER_CONSTANT.
 _OUTSIDE = -1000.0
@@ -61,8 +60,10 @@ def _quadrant_scale(model: LensModel, xn: npt.NDArray[np.float32],
     return scale
 
 
-def build_float_maps(model: LensModel) -> tuple[npt.NDArray[np.float32],
-                                                 npt.NDArray[np.float32]]:
+Map = npt.NDArray[np.float32]
+
+
+def build_float_maps(model: LensModel) -> tuple[Map, Map]:
     """
     Build the float source-pixel maps of the corrected image.
 
@@ -148,7 +149,7 @@ class Rectifier:
 
 
 def distortion_maps(model: LensModel, ideal_K: npt.NDArray[np.float64] | None = None
-                    ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
+                    ) -> tuple[Map, Map]:
     """
     Build maps that render what the camera sees from an ideal pinhole image.
 

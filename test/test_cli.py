@@ -10,13 +10,12 @@ import subprocess
 import sys
 
 import cv2
+from mechdeconv_ros.cli import main
+from mechdeconv_ros.model import build_model
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest
 import yaml
-
-from mechdeconv_ros.cli import main
-from mechdeconv_ros.model import build_model
 
 ROOT = Path(__file__).resolve().parents[1]
 CASE2 = str(ROOT / 'config' / 'case2.yaml')

@@ -7,16 +7,15 @@ from __future__ import annotations
 import math
 
 import cv2
-import numpy as np
-from numpy.testing import assert_allclose
-import pytest
-import yaml
-
 from mechdeconv_ros.model import (
     build_model, camera_info_yaml, ModelError, radii_mean_error_percent)
 from mechdeconv_ros.optics import thick_lens_focal_length
 from mechdeconv_ros.raytrace import image_plane, trace_chief_rays
 from mechdeconv_ros.remap import build_float_maps, Rectifier
+import numpy as np
+from numpy.testing import assert_allclose
+import pytest
+import yaml
 
 CASE2 = {'sensor.width_px': 640, 'sensor.height_px': 480}
 
@@ -165,7 +164,7 @@ def test_non_square_pixels_and_output_size():
 
 
 def test_equivalent_d_matches_opencv(case2):
-    """OpenCV's own undistortPoints with the published K, D, P agrees with the trace."""
+    """Check that OpenCV's own undistortPoints with the published K, D, P agrees with the trace."""
     rng = np.random.default_rng(1)
     points = rng.uniform([0, 0], [639, 479], size=(400, 2))
     ours = case2.rect_from_raw(points)

@@ -7,9 +7,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-import pytest
-
 from mechdeconv_ros import params
+import pytest
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
 
@@ -27,7 +26,7 @@ def test_schema_is_consistent():
 
 
 def test_issue_contract_names_are_declared():
-    contract = '''lens.refractive_index lens.r1_mm lens.r2_mm lens.thickness_mm
+    contract = """lens.refractive_index lens.r1_mm lens.r2_mm lens.thickness_mm
     lens.aperture_diameter_mm lens.stop_offset_mm lens.focal_length_mm lens.exposure_constant_q
     lens.tolerance.r1_mm lens.tolerance.r2_mm lens.tolerance.thickness_mm
     lens.tolerance.refractive_index lens.tolerance.aperture_diameter_mm
@@ -35,7 +34,7 @@ def test_issue_contract_names_are_declared():
     lens.surfaces.semi_diameter_mm lens.stop_surface sensor.pixel_size_x_um
     sensor.pixel_size_y_um sensor.width_px sensor.height_px scene.distance_mm
     scene.focus_distance_mm scene.circle_of_confusion_mm output.alpha output.interpolation
-    output.width_px output.height_px'''.split()
+    output.width_px output.height_px""".split()
     assert set(contract) <= set(params.SPECS)
     assert set(contract) == set(params.MODEL_PARAMS)
 

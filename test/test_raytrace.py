@@ -411,4 +411,3 @@ def test_valid_field_ends_once_where_the_chief_ray_ends():
     assert valid[:count].all()
     assert 0.2628 <= tan[count - 1] < tan[count] <= 0.2630 + np.diff(tan)[0]
     assert np.all(np.diff(heights[:count]) < 0)
-

@@ -32,13 +32,12 @@ import json
 import math
 from pathlib import Path
 
-import numpy as np
-from numpy.testing import assert_allclose
-import pytest
-
 from mechdeconv_ros.optics import thick_lens
 from mechdeconv_ros.raytrace import image_plane, paraxial, Prescription, Surface
 from mechdeconv_ros.raytrace import trace_chief_rays
+import numpy as np
+from numpy.testing import assert_allclose
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 REFERENCE = ROOT / 'test' / 'data' / 'optiland_reference.json'

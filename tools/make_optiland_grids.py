@@ -23,9 +23,10 @@ copied), so both files describe the lenses the same way. Install the pin of
 Self-check: for the m_a variants that the reference file also holds (same focal length, so the
 same object points), the positions must agree with the reference grids to 1e-9 mm.
 
-Signs as in the reference file: ``object_*`` on the object plane (l from the variant's own
-front principal plane), ``tan_* = object / l``, ``ideal_* = v tan`` (v of the variant),
-``real_*`` the chief ray on the sensor as optiland gives it (inverted image: opposite sign).
+Signs as in the reference file: ``object_*`` (shared by all variants) on the object plane, l
+from the variant's own front principal plane, so ``tan = object / l`` and the pinhole image is
+``v tan`` (v of the variant); ``real_*`` is the chief ray on the sensor as optiland gives it
+(inverted image: opposite sign).
 """
 
 from __future__ import annotations
@@ -125,8 +126,6 @@ def trace_variant(ref: Any, grid: dict[str, Any], m_a: float, t: float) -> dict[
         'efl_mm': par['efl_mm'], 'image_distance_mm': v,
         'front_principal_z_mm': par['front_principal_z_mm'],
         'stop_z_mm': cf['front_principal_z_mm'] - m_a,
-        'tan_x': ref.lst(obj_x / l_mm), 'tan_y': ref.lst(obj_y / l_mm),
-        'ideal_x_mm': ref.lst(v * obj_x / l_mm), 'ideal_y_mm': ref.lst(v * obj_y / l_mm),
         'real_x_mm': ref.lst(traced['x_img']), 'real_y_mm': ref.lst(traced['y_img']),
         'max_stop_residual_mm': stop_residual,
     }
@@ -188,6 +187,7 @@ def main(argv: list[str] | None = None) -> int:
                      'Case 2 box grid (pinhole images at coverage x the nominal sensor)',
             'object_distance': 'l from the front principal plane of each variant lens',
             'order': 'row-major: y (rows, ny) outer, x (columns, nx) inner',
+            'tan': 'object_* / l; the pinhole (ideal) image is image_distance_mm * tan',
             'real': 'chief ray on the sensor plane as optiland gives it (inverted image)',
             'aiming': 'optiland iterative ray aiming, as tools/make_optiland_reference.py',
         },

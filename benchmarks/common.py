@@ -1,0 +1,326 @@
+# Copyright 2026 The mechdeconv_ros Authors.
+# SPDX-License-Identifier: Apache-2.0
+"""
+Shared helpers of the benchmarks: machine facts, load monitoring, interleaved timing, output.
+
+Timing method (shared/reference/perf-anchors.md): the variants of one comparison run in
+*rounds*; in every round each variant runs once to warm up and then ``reps`` timed calls, and
+the order of the variants rotates from round to round, so a burst of load from another process
+hits all of them alike. Before each round the machine is given up to ``quiet_wait_s`` to become
+quiet, and how many cores *other* processes used during the round is recorded
+(``others_cores``: busy time of the whole machine from ``/proc/stat`` minus this process's own
+CPU time, over the wall time). A variant is summarised by its ``min`` over every call and the
+``median`` of its per-round medians.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import datetime
+import json
+import math
+import os
+from pathlib import Path
+import platform
+import statistics
+import subprocess
+import sys
+import time
+from typing import Any, Callable, Iterable, Mapping, Sequence
+
+REPO = Path(__file__).resolve().parents[1]
+RESULTS = REPO / 'results'
+#: Per-sample data that the README does not need (ignored by git).
+RAW = RESULTS / 'raw'
+
+_TICK = os.sysconf('SC_CLK_TCK')
+
+
+# ---------------------------------------------------------------------------------------------
+# Machine facts
+# ---------------------------------------------------------------------------------------------
+
+def _lscpu_model() -> str:
+    try:
+        out = subprocess.run(['lscpu'], capture_output=True, text=True, timeout=10).stdout
+    except (OSError, subprocess.SubprocessError):
+        out = ''
+    for line in out.splitlines():
+        if line.startswith('Model name:'):
+            return line.split(':', 1)[1].strip()
+    return platform.processor() or 'unknown'
+
+
+def _version(module: str) -> str | None:
+    try:
+        imported = __import__(module)
+    except ImportError:
+        return None
+    return str(getattr(imported, '__version__', 'unknown'))
+
+
+def _git_commit() -> str | None:
+    try:
+        out = subprocess.run(['git', '-C', str(REPO), 'rev-parse', 'HEAD'], capture_output=True,
+                             text=True, timeout=10)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return out.stdout.strip() or None
+
+
+def machine_info() -> dict[str, Any]:
+    """
+    Return the facts that every results JSON carries.
+
+    :return: CPU model (lscpu), core count, memory, load, OS, Python/numpy/OpenCV versions.
+    """
+    import cv2
+    import numpy as np
+    try:
+        with open('/proc/meminfo', encoding='ascii') as stream:
+            mem_kib = int(stream.readline().split()[1])
+    except (OSError, ValueError, IndexError):
+        mem_kib = 0
+    return {
+        'cpu_model': _lscpu_model(),
+        'nproc': os.cpu_count(),
+        'memory_gib': round(mem_kib / 2 ** 20, 1),
+        'loadavg_1_5_15': list(os.getloadavg()),
+        'platform': platform.platform(),
+        'python': platform.python_version(),
+        'numpy': np.__version__,
+        'opencv': cv2.__version__,
+        'opencv_default_threads': cv2.getNumThreads(),
+        'lensfunpy': _version('lensfunpy'),
+        'git_commit': _git_commit(),
+        'date_utc': datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%dT%H:%M:%SZ'),
+        'executable': sys.executable,
+    }
+
+
+def machine_line(info: Mapping[str, Any]) -> str:
+    """Return a one-line description of the machine for the tables."""
+    return (f"{info['cpu_model']}, {info['nproc']} vCPUs, {info['memory_gib']} GiB; "
+            f"Python {info['python']}, numpy {info['numpy']}, OpenCV {info['opencv']}")
+
+
+# ---------------------------------------------------------------------------------------------
+# Load of the other processes
+# ---------------------------------------------------------------------------------------------
+
+def _machine_busy_s() -> float:
+    """Return the CPU seconds all processes spent busy since boot (``/proc/stat``)."""
+    with open('/proc/stat', encoding='ascii') as stream:
+        fields = [int(x) for x in stream.readline().split()[1:]]
+    idle = fields[3] + (fields[4] if len(fields) > 4 else 0)
+    guest = sum(fields[8:10]) if len(fields) > 9 else 0      # already counted in user/nice
+    return (sum(fields) - idle - guest) / _TICK
+
+
+class LoadMonitor:
+    """
+    Measure how many cores processes other than ours kept busy over an interval.
+
+    ``own`` returns the CPU seconds of what counts as ours (default: this process, all its
+    threads); the node benchmark adds its child processes.
+    """
+
+    def __init__(self, own: Callable[[], float] = time.process_time) -> None:
+        """Start measuring now."""
+        self._own = own
+        self._t0 = time.monotonic()
+        self._busy0 = _machine_busy_s()
+        self._own0 = own()
+
+    def others_cores(self) -> float:
+        """Return the cores other processes used since the start (0 if nothing elapsed)."""
+        wall = time.monotonic() - self._t0
+        if wall <= 0.0:
+            return 0.0
+        busy = _machine_busy_s() - self._busy0
+        own = self._own() - self._own0
+        return max(0.0, (busy - own) / wall)
+
+    def total_cores(self) -> float:
+        """Return the cores the whole machine used since the start."""
+        wall = time.monotonic() - self._t0
+        return (_machine_busy_s() - self._busy0) / wall if wall > 0 else 0.0
+
+
+def wait_for_quiet(max_wait_s: float, threshold_cores: float = 0.15,
+                   window_s: float = 0.25) -> float:
+    """
+    Wait (up to ``max_wait_s``) until other processes use less than ``threshold_cores``.
+
+    :return: the others' cores in the last window measured (0 when not waiting at all).
+    """
+    deadline = time.monotonic() + max_wait_s
+    others = 0.0
+    while time.monotonic() < deadline:
+        monitor = LoadMonitor()
+        time.sleep(window_s)
+        others = monitor.others_cores()
+        if others < threshold_cores:
+            break
+    return others
+
+
+def wait_for_low_load(max_wait_s: float, threshold: float = 0.5, poll_s: float = 10.0,
+                      log: Callable[[str], None] = print) -> float:
+    """
+    Wait (up to ``max_wait_s``) for the 1-minute load average to fall below ``threshold``.
+
+    :return: the 1-minute load average when the wait ended.
+    """
+    deadline = time.monotonic() + max_wait_s
+    load = os.getloadavg()[0]
+    if load >= threshold and max_wait_s > 0:
+        log(f'load average {load:.2f} >= {threshold}: waiting up to {max_wait_s:.0f} s')
+    while load >= threshold and time.monotonic() < deadline:
+        time.sleep(min(poll_s, max(0.0, deadline - time.monotonic())))
+        load = os.getloadavg()[0]
+    return load
+
+
+# ---------------------------------------------------------------------------------------------
+# Interleaved timing
+# ---------------------------------------------------------------------------------------------
+
+@dataclass
+class Variant:
+    """One thing to time: a call, and the OpenCV thread count to run it with (0 = leave)."""
+
+    name: str
+    call: Callable[[], Any]
+    threads: int = 0
+    info: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class Timing:
+    """Timed calls of one variant, ms."""
+
+    name: str
+    samples: list[list[float]] = field(default_factory=list)      # per round
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def all(self) -> list[float]:
+        """Return every sample."""
+        return [t for r in self.samples for t in r]
+
+    @property
+    def min(self) -> float:
+        """Return the fastest call, ms."""
+        return min(self.all) if self.all else math.nan
+
+    @property
+    def median(self) -> float:
+        """Return the median of the per-round medians, ms."""
+        meds = [statistics.median(r) for r in self.samples if r]
+        return statistics.median(meds) if meds else math.nan
+
+    def summary(self) -> dict[str, Any]:
+        """Return min, median, count, and the info."""
+        return {'min_ms': self.min, 'median_ms': self.median, 'calls': len(self.all),
+                **self.info}
+
+
+def time_ms(call: Callable[[], Any], reps: int) -> list[float]:
+    """Call ``reps`` times; return each call's wall time in ms."""
+    out = []
+    clock = time.perf_counter_ns
+    for _ in range(reps):
+        start = clock()
+        call()
+        out.append((clock() - start) * 1e-6)
+    return out
+
+
+def interleave(variants: Sequence[Variant], rounds: int, reps: int | Mapping[str, int],
+               quiet_wait_s: float = 2.0) -> tuple[dict[str, Timing], list[float]]:
+    """
+    Time variants in interleaved rounds (see the module docstring).
+
+    :param variants: what to time; a variant with ``threads > 0`` runs after
+        ``cv2.setNumThreads(threads)``.
+    :param rounds: rounds; the variant order rotates by one each round.
+    :param reps: timed calls per variant and round (or per variant name).
+    :param quiet_wait_s: the longest wait for a quiet machine before each round.
+    :return: timings by name, and the others' cores of each round.
+    """
+    import cv2
+    previous_threads = cv2.getNumThreads()
+    timings = {v.name: Timing(v.name, info=dict(v.info, threads=v.threads)) for v in variants}
+    others = []
+    try:
+        for r in range(rounds):
+            wait_for_quiet(quiet_wait_s)
+            monitor = LoadMonitor()
+            shift = r % len(variants)
+            for v in list(variants[shift:]) + list(variants[:shift]):
+                if v.threads:
+                    cv2.setNumThreads(v.threads)
+                v.call()                                          # warm-up
+                n = reps[v.name] if isinstance(reps, Mapping) else reps
+                timings[v.name].samples.append(time_ms(v.call, n))
+            others.append(monitor.others_cores())
+    finally:
+        cv2.setNumThreads(previous_threads)
+    return timings, others
+
+
+# ---------------------------------------------------------------------------------------------
+# Output
+# ---------------------------------------------------------------------------------------------
+
+def _clean(value: Any) -> Any:
+    """Make a value JSON-ready: NaN/inf -> None, numpy scalars -> Python."""
+    if isinstance(value, dict):
+        return {str(k): _clean(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_clean(v) for v in value]
+    if hasattr(value, 'tolist') and not isinstance(value, (str, bytes)):
+        return _clean(value.tolist())
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def write_json(path: Path, doc: Mapping[str, Any]) -> Path:
+    """Write ``doc`` (NaN -> null) as indented JSON; create the folder."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(_clean(doc), indent=1) + '\n')
+    return path
+
+
+def fmt_ms(value: float | None) -> str:
+    """Format a time in ms with 3 significant digits (``-`` when missing)."""
+    if value is None or not math.isfinite(value):
+        return '-'
+    if value >= 100:
+        return f'{value:.0f}'
+    if value >= 10:
+        return f'{value:.1f}'
+    if value >= 1:
+        return f'{value:.2f}'
+    return f'{value:.3f}'
+
+
+def fmt_ratio(value: float | None) -> str:
+    """Format a ratio (``x``) with 2 decimals."""
+    if value is None or not math.isfinite(value):
+        return '-'
+    return f'{value:.2f}'
+
+
+def markdown_table(header: Sequence[str], rows: Iterable[Sequence[Any]]) -> list[str]:
+    """Return the lines of a GitHub markdown table."""
+    lines = ['| ' + ' | '.join(header) + ' |', '|' + '---|' * len(header)]
+    lines += ['| ' + ' | '.join(str(c) for c in row) + ' |' for row in rows]
+    return lines
+
+
+def log(message: str) -> None:
+    """Print a progress line to stderr."""
+    print(message, file=sys.stderr, flush=True)
