@@ -35,7 +35,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 import math
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 from mechdeconv_ros import constraints
 from mechdeconv_ros.optics import biconvex_for_focal_length, propagate_sigma, thick_lens
@@ -228,7 +228,18 @@ class LensModel:
                 'real_height_mm': self.curve.real_mm[::step].tolist(),
             },
         })
-        return out
+        return _json_safe(out)
+
+
+def _json_safe(value: Any) -> Any:
+    """Replace NaN and inf (undefined or infinite quantities) by None, recursively."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    return value
 
 
 def radii_mean_error_percent(estimated_px: FloatArray, true_px: FloatArray,
@@ -473,11 +484,15 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0) -> L
         if coarse.ideal_mm.size < 1024 or coarse.valid_real_mm >= 1.05 * edge_real:
             break
         ideal_max *= 2.0
-    if coarse.ideal_mm.size < 16 or coarse.valid_real_mm < 0.05 * edge_real:
+    if coarse.ideal_mm.size == 0:
+        raise ModelError(_lens_param(vals), 'not even the axial ray passes through this lens: '
+                                            'a surface misses it or reflects it totally')
+    reached = coarse.valid_real_mm
+    if coarse.ideal_mm.size < 16 or reached < 0.05 * edge_real:
         raise ModelError(_stop_param(vals),
-                         'no chief ray reaches the sensor beyond '
-                         f'{coarse.valid_real_mm:.3g} mm of the {edge_real:.3g} mm half-diagonal: '
-                         'the stop position or the lens blocks the field')
+                         f'no chief ray reaches the sensor beyond {reached:.3g} mm of the '
+                         f'{edge_real:.3g} mm half-diagonal: the stop position or the lens '
+                         'blocks the field')
     boundary = _boundary_points(w, h)
     bx = (boundary[:, 0] - K[0, 2]) * px
     by = (boundary[:, 1] - K[1, 2]) * py
@@ -578,7 +593,7 @@ def _summary(model: LensModel) -> dict[str, Any]:
     def efl(p: Mapping[str, float]) -> float:
         return paraxial(make_prescription(_with(vals, p))).efl_mm
 
-    sigma_f = propagate_sigma(efl, nominal, sigmas)
+    sigma_f = _sigma_or_nan(efl, nominal, sigmas)
     w_mm = constraints.sensor_size_mm(model.width, vals['sensor.pixel_size_x_um'])
     h_mm = constraints.sensor_size_mm(model.height, vals['sensor.pixel_size_y_um'])
     q = float(vals['lens.exposure_constant_q'])
@@ -596,7 +611,7 @@ def _summary(model: LensModel) -> dict[str, Any]:
         return constraints.hyperfocal_mm(f_p, n_fp, c_p)
 
     sigma_d_a = float(vals['lens.tolerance.aperture_diameter_mm'])
-    sigma_h = propagate_sigma(hyper, {**nominal, 'd_a': d_a}, {**sigmas, 'd_a': sigma_d_a})
+    sigma_h = _sigma_or_nan(hyper, {**nominal, 'd_a': d_a}, {**sigmas, 'd_a': sigma_d_a})
     focus = float(vals['scene.focus_distance_mm']) or distance
     focus = math.inf if focus == 0.0 else focus
     near, far = constraints.depth_of_field_mm(h, focus)
@@ -663,11 +678,22 @@ def _corner_sigma_px(model: LensModel, vals: Mapping[str, Any], nominal: Mapping
         z, _ = image_plane(lens, distance)
         return float(-trace_chief_rays(lens, distance, z, tan_field)[0])
 
+    return _sigma_or_nan(height, nominal, sigmas) / min(model.pixel_mm)
+
+
+def _sigma_or_nan(fn: Callable[[Mapping[str, float]], float], nominal: Mapping[str, float],
+                  sigmas: Mapping[str, float]) -> float:
+    """
+    Propagate tolerances, or return NaN where a perturbed lens is no lens at all.
+
+    Near the edge of the parameter space (an almost afocal lens, a thickness at 0) a
+    perturbation by one sigma can leave it; the sigma is then undefined, not an error.
+    """
     try:
-        sigma_mm = propagate_sigma(height, nominal, sigmas)
-    except (ValueError, ModelError):
+        sigma = propagate_sigma(fn, dict(nominal), dict(sigmas))
+    except (ValueError, ZeroDivisionError, FloatingPointError):
         return math.nan
-    return float(sigma_mm / min(model.pixel_mm))
+    return float(sigma) if math.isfinite(sigma) else math.nan
 
 
 def camera_info_yaml(model: LensModel, camera_name: str = 'mechdeconv') -> str:

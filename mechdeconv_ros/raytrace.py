@@ -270,7 +270,9 @@ def paraxial(prescription: Prescription) -> Paraxial:
     :raises ValueError: when the system is afocal (|1/f| < 1e-9 /mm).
     """
     z_last = float(vertex_z(prescription)[-1])
-    a, _, c, d = _paraxial_matrix(prescription, len(prescription.surfaces), 0.0, z_last)
+    # Absurd curvatures can overflow to inf * 0 = NaN; that reads as "afocal" below.
+    with np.errstate(all='ignore'):
+        a, _, c, d = _paraxial_matrix(prescription, len(prescription.surfaces), 0.0, z_last)
     a, c, d = float(a), float(c), float(d)
     power = -c
     if not abs(power) >= AFOCAL_POWER_PER_MM:
