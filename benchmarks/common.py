@@ -205,14 +205,14 @@ class Timing:
     info: dict[str, Any] = field(default_factory=dict)
 
     @property
-    def all(self) -> list[float]:
+    def flat(self) -> list[float]:
         """Return every sample."""
         return [t for r in self.samples for t in r]
 
     @property
-    def min(self) -> float:
+    def fastest(self) -> float:
         """Return the fastest call, ms."""
-        return min(self.all) if self.all else math.nan
+        return min(self.flat) if self.flat else math.nan
 
     @property
     def median(self) -> float:
@@ -222,7 +222,7 @@ class Timing:
 
     def summary(self) -> dict[str, Any]:
         """Return min, median, count, and the info."""
-        return {'min_ms': self.min, 'median_ms': self.median, 'calls': len(self.all),
+        return {'min_ms': self.fastest, 'median_ms': self.median, 'calls': len(self.flat),
                 **self.info}
 
 

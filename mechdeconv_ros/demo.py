@@ -14,9 +14,11 @@
 3. Writes ``raw.png`` and ``corrected.png``.
 4. Changes the lens: ``lens.stop_offset_mm`` and ``lens.thickness_mm`` are set together, first
    on ``demo_camera`` (a physical change of the real lens), then on ``correct_node`` (the user
-   telling the node), each through ``<node>/set_parameters_atomically`` as ``ros2 param load``
-   would. Prints the replies, the time from the node's reply to the first frame corrected by
-   the new model (seen as ``camera_info`` D changing) and the rebuild time the node reports.
+   telling the node), each through ``<node>/set_parameters_atomically``: one validation and
+   one rebuild for the pair (two ``ros2 param set`` calls, or ``ros2 param load``, would apply
+   them one at a time; README, "Install as a ROS 2 package"). Prints the replies, the time
+   from the node's reply to the first frame corrected by the new model (seen as
+   ``camera_info`` D changing) and the rebuild time the node reports.
 5. Writes ``raw_after_change.png``, ``corrected_after_change.png`` and ``summary.png`` (the four
    side by side), prints throughput and latency again, stops both processes with SIGINT and
    checks that they exit with status 0.
@@ -29,6 +31,7 @@ window, default 10; also ``MECHDECONV_DEMO_SECONDS``), ``--out`` (default ``demo
 from __future__ import annotations
 
 import argparse
+import json
 import os
 from pathlib import Path
 import random
@@ -108,6 +111,13 @@ def graph_env(domain_id: int, config: Path) -> dict[str, str]:
     for name, value in MALLOC_ENV.items():
         env[name] = os.environ.get(name, value)
     return env
+
+
+def _pythonpath() -> str:
+    """Return PYTHONPATH with this package's parent first: children import this very copy."""
+    root = str(Path(__file__).resolve().parent.parent)
+    rest = [p for p in os.environ.get('PYTHONPATH', '').split(os.pathsep) if p and p != root]
+    return os.pathsep.join([root] + rest)
 
 
 def _set_parent_death_signal() -> None:
@@ -236,6 +246,7 @@ def make_monitor(rclpy_node_cls: Any) -> Any:
             self.d_changed_at: float | None = None          # monotonic s
             self.d_changed_stamp: int | None = None
             self.diag: dict[str, str] = {}
+            self.frames_in: list[tuple[float, int]] = []    # (receive monotonic s, node input)
             self.diag_message = ''
             self.raw_wanted: list[Image] = []
             self._raw_sub: Any = None
@@ -275,6 +286,8 @@ def make_monitor(rclpy_node_cls: Any) -> Any:
                     with self.lock:
                         self.diag = {kv.key: kv.value for kv in status.values}
                         self.diag_message = status.message
+                        if self.diag.get('frames_in', '').isdigit():
+                            self.frames_in.append((time.monotonic(), int(self.diag['frames_in'])))
 
         def _on_raw(self, msg: Image) -> None:
             with self.lock:
@@ -293,11 +306,20 @@ def make_monitor(rclpy_node_cls: Any) -> Any:
             finally:
                 self.destroy_subscription(sub)
 
-        def window(self, start: float, end: float) -> tuple[float, list[float]]:
-            """Return (fps, latencies in ms) of the image_rect frames received in a window."""
+        def window(self, start: float, end: float) -> tuple[float, list[float], float]:
+            """
+            Return the image_rect fps and latencies (ms) received in a window.
+
+            Also the node's input fps over the same window, from the frames_in counter of its
+            diagnostics (1 Hz, so over the whole seconds inside the window; NaN if unknown).
+            """
             with self.lock:
                 lat = [ms for t, ms in self.frames if start <= t < end]
-            return len(lat) / max(end - start, 1e-9), lat
+                counts = [(t, n) for t, n in self.frames_in if start <= t <= end]
+            node_fps = float('nan')
+            if len(counts) >= 2 and counts[-1][0] > counts[0][0]:
+                node_fps = (counts[-1][1] - counts[0][1]) / (counts[-1][0] - counts[0][0])
+            return len(lat) / max(end - start, 1e-9), lat, node_fps
 
         def set_lens(self, node: str, values: dict[str, float],
                      timeout_s: float) -> tuple[Any, float, float]:
@@ -370,10 +392,10 @@ def measure(monitor: Any, seconds: float, label: str, rate_hz: float,
     start = time.monotonic()
     wait_for(lambda: time.monotonic() - start >= seconds, seconds + 5.0, 'end of window',
              children)
-    fps, lat = monitor.window(start, time.monotonic())
-    say(f'  throughput {fps:.1f} fps of {rate_hz:g} Hz published; latency camera -> '
-        f'image_rect p50 {percentile(lat, 50):.1f} ms, p95 {percentile(lat, 95):.1f} ms '
-        f'({len(lat)} frames)')
+    fps, lat, node_fps = monitor.window(start, time.monotonic())
+    say(f'  throughput {fps:.1f} fps of image_rect (camera {rate_hz:g} Hz, node input '
+        f'{node_fps:.1f} fps); latency camera -> image_rect p50 {percentile(lat, 50):.1f} ms, '
+        f'p95 {percentile(lat, 95):.1f} ms ({len(lat)} frames)')
 
 
 def caption(image: np.ndarray, text: str) -> np.ndarray:
@@ -448,7 +470,7 @@ def run(args: argparse.Namespace, children: list[Child]) -> int:
     :return: exit status.
     """
     from mechdeconv_ros.cli import format_report
-    from mechdeconv_ros.model import build_model
+    from mechdeconv_ros.model import build_model, ModelError
     from mechdeconv_ros.params import load_params_file
 
     config = package_config_dir()
@@ -460,13 +482,16 @@ def run(args: argparse.Namespace, children: list[Child]) -> int:
         current = os.environ.get('ROS_DOMAIN_ID', '0')
         domain = random.choice([d for d in range(1, 102) if str(d) != current])
     env_vars = graph_env(domain, config)
-    env = dict(os.environ, **env_vars)
+    env = dict(os.environ, **env_vars, PYTHONPATH=_pythonpath())
 
     # The lens before and after, built here too: the summary, and a check of the new values.
     values = load_params_file(params_file)
     change = {'lens.stop_offset_mm': args.stop_offset, 'lens.thickness_mm': args.thickness}
     before = build_model(values, 640, 480)
-    after = build_model({**values, **change}, 640, 480)
+    try:
+        after = build_model({**values, **change}, 640, 480)
+    except ModelError as err:
+        raise DemoError(f'the new lens describes no usable camera: {err}') from None
 
     say(f'ROS_DOMAIN_ID={domain}, ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, '
         f"FASTRTPS_DEFAULT_PROFILES_FILE={env_vars['FASTRTPS_DEFAULT_PROFILES_FILE']}")
@@ -616,6 +641,11 @@ def print_diagnostics(monitor: Any) -> None:
     keys = ('model_revision', 'last_rebuild_ms', 'focal_length_mm', 'distortion_model', 'D',
             'fit_rms_px', 'max_displacement_px', 'frames_in', 'frames_out', 'frames_dropped',
             'frame_time_ms_mean', 'frame_time_ms_max')
+    if 'D' in diag:
+        try:
+            diag['D'] = '[' + ', '.join(f'{d:.5g}' for d in json.loads(diag['D'])) + ']'
+        except (ValueError, TypeError):
+            pass
     print(f'node diagnostics ({message}):', flush=True)
     print('  ' + ', '.join(f'{k} {diag[k]}' for k in keys if k in diag), flush=True)
 
@@ -634,7 +664,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         # subscriber whose latency is measured) runs like the other two.
         os.execve(sys.executable, [sys.executable, '-m', 'mechdeconv_ros.demo',
                                    *(sys.argv[1:] if argv is None else argv)],
-                  dict(os.environ, **missing))
+                  dict(os.environ, **missing, PYTHONPATH=_pythonpath()))
     interrupted = threading.Event()
 
     def on_signal(signum: int, frame: Any) -> None:

@@ -37,6 +37,12 @@ import sys
 from typing import Any, Sequence
 
 import cv2
+from mechdeconv_ros.correct_node import descriptor_for
+from mechdeconv_ros.image_msgs import ImageFormatError, new_output_image, OutputImage
+from mechdeconv_ros.model import build_model, LensModel, ModelError
+from mechdeconv_ros.params import check_values, load_params_file, ParamSpec, SCHEMA
+from mechdeconv_ros.plots import grid_image
+from mechdeconv_ros.remap import distortion_maps
 import numpy as np
 import numpy.typing as npt
 from rcl_interfaces.msg import (
@@ -48,19 +54,13 @@ from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
 
-from mechdeconv_ros.correct_node import descriptor_for
-from mechdeconv_ros.image_msgs import ImageFormatError, new_output_image, OutputImage
-from mechdeconv_ros.model import build_model, LensModel, ModelError
-from mechdeconv_ros.params import check_values, load_params_file, ParamSpec, SCHEMA
-from mechdeconv_ros.plots import grid_image
-from mechdeconv_ros.remap import distortion_maps
-
 #: Schema groups the camera declares: what defines the lens, the sensor and the scene.
 CAMERA_GROUPS = ('lens', 'sensor', 'scene')
 #: Grey level of the wall around the chart (and of anything outside the lens's valid field).
 WALL = 40
 #: Encodings the camera renders (8 bits per channel, and mono16 scaled from mono8).
 CAMERA_ENCODINGS = ('rgb8', 'bgr8', 'rgba8', 'bgra8', 'mono8', 'mono16')
+
 
 def camera_specs() -> tuple[ParamSpec, ...]:
     """
@@ -200,7 +200,7 @@ class DemoCamera(Node):
         self._declare(
             'params_file', '', 'ROS 2 params file whose lens.*, sensor.* and scene.* values are '
             'the defaults of those parameters (read once at start-up); empty = the schema '
-            'defaults (the paper\'s Case 2). --params-file overrides win over it.',
+            "defaults (the paper's Case 2). --params-file overrides win over it.",
             ParameterType.PARAMETER_STRING, read_only=True)
         self._declare('width', 640, 'Image width [px].', ParameterType.PARAMETER_INTEGER,
                       int_range=(1, 16384))

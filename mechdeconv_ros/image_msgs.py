@@ -32,11 +32,10 @@ from dataclasses import dataclass
 import sys
 from typing import Any, TYPE_CHECKING
 
+from mechdeconv_ros.params import MAX_FRAME_PIXELS, MAX_SIDE_PX
 import numpy as np
 import numpy.typing as npt
 from sensor_msgs.msg import CameraInfo, Image
-
-from mechdeconv_ros.params import MAX_FRAME_PIXELS, MAX_SIDE_PX
 
 if TYPE_CHECKING:
     from mechdeconv_ros.model import LensModel

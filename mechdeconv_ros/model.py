@@ -487,7 +487,7 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0) -> L
     if coarse.ideal_mm.size == 0:
         raise ModelError(_lens_param(vals), 'not even the axial ray passes through this lens: '
                                             'a surface misses it or reflects it totally')
-    reached = coarse.valid_real_mm
+    reached = max(0.0, coarse.valid_real_mm)
     if coarse.ideal_mm.size < 16 or reached < 0.05 * edge_real:
         raise ModelError(_stop_param(vals),
                          f'no chief ray reaches the sensor beyond {reached:.3g} mm of the '

@@ -7,7 +7,9 @@ The demo starts the real ``correct_node`` and ``demo_camera`` processes. The pic
 are checked against the lens model: the corrected frame must show the camera's chart
 undistorted (much closer to the chart than the raw frame is), and after the lens change the
 corrected frame must be the chart as the NEW lens sees it, corrected by the new model.
-A second test interrupts the demo as Ctrl-C would and checks that nothing is left running.
+Another test interrupts the demo as Ctrl-C would and checks that nothing is left running.
+The camera node itself is also tested in this process (its own rclpy Context): what it
+publishes, and how it takes and refuses lens changes.
 """
 
 from __future__ import annotations
@@ -20,16 +22,27 @@ import subprocess
 import sys
 import time
 
-import cv2
-import numpy as np
-import pytest
+from typing import Iterator
 
-from mechdeconv_ros.demo_camera import Chart
+import cv2
+from mechdeconv_ros.demo_camera import Chart, convert_rgb, DemoCamera
+from mechdeconv_ros.image_msgs import image_to_array
 from mechdeconv_ros.model import build_model, LensModel
 from mechdeconv_ros.params import load_params_file
 from mechdeconv_ros.remap import Rectifier
+import numpy as np
+from numpy.testing import assert_array_equal
+import pytest
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import Image
 
 REPO = Path(__file__).resolve().parents[1]
+DemoRun = tuple[subprocess.CompletedProcess, Path, float]
 CASE2 = REPO / 'config' / 'case2.yaml'
 #: The demo's default lens change.
 CHANGE = {'lens.stop_offset_mm': 0.6, 'lens.thickness_mm': 4.0}
@@ -70,8 +83,7 @@ def expected_corrected(chart: Chart, model: LensModel) -> np.ndarray:
 
 
 @pytest.fixture(scope='module')
-def demo_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[subprocess.CompletedProcess,
-                                                                   Path, float]:
+def demo_run(tmp_path_factory: pytest.TempPathFactory) -> DemoRun:
     """Run the demo once with short measuring windows; return (result, out folder, seconds)."""
     out = tmp_path_factory.mktemp('demo_out')
     start = time.monotonic()
@@ -84,7 +96,7 @@ def demo_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[subprocess.Compl
 
 @pytest.mark.ros
 def test_demo_exits_0_in_time_and_both_nodes_accept_the_lens(
-        demo_run: tuple[subprocess.CompletedProcess, Path, float]) -> None:
+        demo_run: DemoRun) -> None:
     result, _, seconds = demo_run
     log = result.stdout + result.stderr
     assert result.returncode == 0, log
@@ -99,7 +111,7 @@ def test_demo_exits_0_in_time_and_both_nodes_accept_the_lens(
 
 @pytest.mark.ros
 def test_demo_pictures_show_the_correction_before_and_after_the_change(
-        demo_run: tuple[subprocess.CompletedProcess, Path, float]) -> None:
+        demo_run: DemoRun) -> None:
     result, out, _ = demo_run
     assert result.returncode == 0, result.stdout + result.stderr
     names = ('raw.png', 'corrected.png', 'raw_after_change.png', 'corrected_after_change.png',
@@ -168,3 +180,102 @@ def _is_zombie(pid: int) -> bool:
         return Path(f'/proc/{pid}/stat').read_text().split(')')[-1].split()[0] == 'Z'
     except OSError:
         return True
+
+
+# ---------------------------------------------------------------------------------------------
+# The camera node, in this process
+# ---------------------------------------------------------------------------------------------
+
+
+@pytest.fixture
+def context() -> Iterator[Context]:
+    """Give each camera test its own rclpy Context on a private domain."""
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=1 + (os.getpid() * 13) % 100)
+    try:
+        yield ctx
+    finally:
+        rclpy.try_shutdown(context=ctx)
+
+
+def case2_overrides(**extra: object) -> list[Parameter]:
+    """Return the camera's parameters as the Case 2 params file gives them, plus ``extra``."""
+    values = load_params_file(CASE2)
+    names = [n for n in values if n.startswith(('lens.', 'sensor.', 'scene.'))
+             and not n.startswith('lens.surfaces.')]
+    params = [Parameter(n, value=values[n]) for n in names]
+    return params + [Parameter(k, value=v) for k, v in extra.items()]
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize('encoding', ['rgb8', 'bgr8', 'mono8'], ids=['rgb8', 'bgr8', 'mono8'])
+def test_camera_publishes_the_chart_through_the_lens_stamped_now(
+        context: Context, encoding: str) -> None:
+    camera = DemoCamera(context=context,
+                        parameter_overrides=case2_overrides(encoding=encoding, rate_hz=50.0))
+    client = Node('camera_test_client', context=context)
+    received: list[Image] = []
+    client.create_subscription(Image, 'image_raw', received.append, qos_profile_sensor_data)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(camera)
+    executor.add_node(client)
+    try:
+        deadline = time.monotonic() + 10.0
+        while len(received) < 3 and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.1)
+        assert len(received) >= 3, 'no image_raw from the camera'
+        msg = received[-1]
+        now_ns = client.get_clock().now().nanoseconds
+        stamp_ns = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+        assert 0 <= now_ns - stamp_ns < 2 * 10**9     # set when published, not at start-up
+        assert received[0].header.stamp != msg.header.stamp
+        assert (msg.width, msg.height, msg.encoding) == (640, 480, encoding)
+        assert msg.header.frame_id == 'camera_optical_frame'
+        model = build_model(load_params_file(CASE2), 640, 480)
+        expected = convert_rgb(Chart(model).render(model), encoding)
+        pixels, _ = image_to_array(msg)
+        assert_array_equal(pixels, expected)
+    finally:
+        executor.shutdown()
+        client.destroy_node()
+        camera.destroy_node()
+
+
+@pytest.mark.ros
+def test_camera_takes_an_atomic_lens_change_and_refuses_impossible_ones(
+        context: Context) -> None:
+    camera = DemoCamera(context=context, parameter_overrides=case2_overrides())
+    try:
+        before = camera._out.pixels.copy()
+        model = build_model(load_params_file(CASE2), 640, 480)
+        chart = Chart(model)
+
+        # Inside the focal length: refused with the model's reason, nothing changes.
+        result = camera.set_parameters_atomically([Parameter('scene.distance_mm', value=3.0)])
+        assert not result.successful
+        assert 'scene.distance_mm' in result.reason and 'focal length' in result.reason
+        assert camera.get_parameter('scene.distance_mm').value == 1000.0
+        assert_array_equal(camera._out.pixels, before)
+
+        # A sensor size that is not the camera's: refused, with both names in the reason.
+        result = camera.set_parameters_atomically([Parameter('sensor.width_px', value=800)])
+        assert not result.successful and 'sensor.width_px' in result.reason
+
+        # The demo's change, atomically: rendered through the new lens, chart fixed in the world.
+        result = camera.set_parameters_atomically(
+            [Parameter(name, value=value) for name, value in CHANGE.items()])
+        assert result.successful, result.reason
+        after = build_model({**load_params_file(CASE2), **CHANGE}, 640, 480)
+        assert_array_equal(camera._out.pixels, chart.render(after))
+        assert blurred_difference(camera._out.pixels, before) > 5.0
+
+        # Size and rate together: a new preallocated image of the new size.
+        result = camera.set_parameters_atomically([
+            Parameter('width', value=320), Parameter('height', value=240),
+            Parameter('sensor.width_px', value=320), Parameter('sensor.height_px', value=240),
+            Parameter('rate_hz', value=10.0)])
+        assert result.successful, result.reason
+        assert camera._out.pixels.shape == (240, 320, 3)
+        assert (camera._out.msg.width, camera._out.msg.height) == (320, 240)
+    finally:
+        camera.destroy_node()

@@ -9,16 +9,15 @@ from types import SimpleNamespace
 from typing import Any
 
 import cv2
-import numpy as np
-import numpy.testing as npt
-import pytest
-from sensor_msgs.msg import CameraInfo, Image
-
 from mechdeconv_ros import image_msgs
 from mechdeconv_ros.image_msgs import (
     camera_info_from_model, ENCODINGS, fill_camera_info, image_to_array, lookup_encoding,
     MalformedImageError, new_output_image, OutputImagePool, UnsupportedEncodingError)
 from mechdeconv_ros.params import MAX_SIDE_PX
+import numpy as np
+import numpy.testing as npt
+import pytest
+from sensor_msgs.msg import CameraInfo, Image
 
 RNG_SEED = 0
 

@@ -26,19 +26,21 @@ from typing import Any, Iterator
 import xml.etree.ElementTree as ElementTree
 
 from diagnostic_msgs.msg import DiagnosticArray
+from mechdeconv_ros.image_msgs import image_to_array
+from mechdeconv_ros.model import build_model, LensModel
+from mechdeconv_ros.params import defaults, load_params_file, to_params_yaml
+from mechdeconv_ros.remap import Rectifier
 import numpy as np
 import numpy.testing as npt
 import pytest
 from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from ros_helpers import (
     BEST_EFFORT, FASTDDS_PROFILE, make_image, next_domain_id, node_command, NodeProcess,
     REPO, ros_env, RosClient, stamp_of)
 from sensor_msgs.msg import CameraInfo, Image
 
-from mechdeconv_ros.image_msgs import image_to_array
-from mechdeconv_ros.model import build_model, LensModel
-from mechdeconv_ros.params import defaults, load_params_file, to_params_yaml
-from mechdeconv_ros.remap import Rectifier
+pytestmark = pytest.mark.ros
 
 #: Follow the image size (case2.yaml fixes 640x480) so each test can pick its frame size.
 FOLLOW_IMAGES = ('sensor.width_px:=0', 'sensor.height_px:=0')
@@ -210,6 +212,18 @@ def assert_camera_infos(result: dict[str, Any], model: LensModel) -> None:
     npt.assert_allclose(rect.r, np.eye(3).ravel())
 
 
+def _exchange_until_model(harness: Harness, outputs: Outputs, msg: Image,
+                          model: LensModel, timeout: float = 5.0,
+                          check: Any = None) -> dict[str, Any]:
+    """Exchange frames until the node's camera_info carries ``model``'s D (and ``check``)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        result = harness.exchange(outputs, msg)
+        done = np.allclose(result['info'].d, model.D, rtol=1e-7, atol=1e-12)
+        if (done and (check is None or check(result))) or time.monotonic() > deadline:
+            return result
+
+
 # ---------------------------------------------------------------------------------------------
 # Frames in, three outputs out
 # ---------------------------------------------------------------------------------------------
@@ -304,20 +318,43 @@ def test_frame_of_other_size_than_fixed_sensor_is_dropped(
     harness.exchange(outputs, make_image(test_pattern(*SMALL), 'mono8'))
 
 
+def test_new_input_size_and_output_size(harness: Harness, outputs: Outputs) -> None:
+    harness.exchange(outputs, make_image(test_pattern(*SMALL), 'mono8'))
+    dropped = int(harness.diag()['frames_dropped'])
+    # A new input resolution: the frame that brings it is corrected by a model of its size.
+    src = test_pattern(200, 150)
+    result = harness.exchange(outputs, make_image(src, 'mono8'))
+    model = expected_model(harness.values, 200, 150)
+    assert_camera_infos(result, model)
+    got, _ = image_to_array(result['image'])
+    npt.assert_array_equal(got, Rectifier(model).correct(src))
+    # An output size of its own: image_rect and camera_info_rect follow it, camera_info
+    # keeps describing the raw camera.
+    sized = harness.client.set_parameters_atomically(
+        Parameter('output.width_px', Parameter.Type.INTEGER, 400),
+        Parameter('output.height_px', Parameter.Type.INTEGER, 300))
+    assert sized.successful, sized.reason
+    try:
+        values = dict(harness.values, **{'output.width_px': 400, 'output.height_px': 300})
+        model = expected_model(values, 200, 150)
+        result = _exchange_until_model(harness, outputs, make_image(src, 'mono8'), model,
+                                       check=lambda r: r['image'].width == 400)
+        assert (result['image'].width, result['image'].height) == (400, 300)
+        assert_camera_infos(result, model)
+        got, _ = image_to_array(result['image'])
+        npt.assert_array_equal(got, Rectifier(model).correct(src))
+    finally:
+        reset = harness.client.set_parameters_atomically(
+            Parameter('output.width_px', Parameter.Type.INTEGER, 0),
+            Parameter('output.height_px', Parameter.Type.INTEGER, 0))
+        assert reset.successful, reset.reason
+    harness.exchange(outputs, make_image(test_pattern(*SMALL), 'mono8'))
+    assert int(harness.diag()['frames_dropped']) == dropped
+
+
 # ---------------------------------------------------------------------------------------------
 # Parameters
 # ---------------------------------------------------------------------------------------------
-
-def _exchange_until_model(harness: Harness, outputs: Outputs, msg: Image,
-                          model: LensModel, timeout: float = 5.0) -> dict[str, Any]:
-    """Exchange frames until the node's camera_info carries ``model``'s D."""
-    deadline = time.monotonic() + timeout
-    while True:
-        result = harness.exchange(outputs, msg)
-        if np.allclose(result['info'].d, model.D, rtol=1e-7, atol=1e-12) or \
-                time.monotonic() > deadline:
-            return result
-
 
 def test_parameter_sets_rebuild_the_model(harness: Harness, outputs: Outputs) -> None:
     width, height = SMALL
@@ -358,53 +395,95 @@ def test_parameter_sets_rebuild_the_model(harness: Harness, outputs: Outputs) ->
         harness.values.update(original)
     model = expected_model(harness.values, width, height)
     assert_camera_infos(_exchange_until_model(harness, outputs, msg, model), model)
+    # Setting a parameter to the value it has rebuilds nothing.
+    revision = harness.revision()
+    same = harness.client.set_parameters(
+        double('lens.stop_offset_mm', harness.values['lens.stop_offset_mm']))
+    assert same[0].successful, same[0].reason
+    harness.exchange(outputs, msg)
+    assert harness.revision() == revision
 
 
 AFOCAL = (double('lens.refractive_index', 1.5), double('lens.r1_mm', 10.0),
           double('lens.r2_mm', 5.0), double('lens.thickness_mm', 15.0))
 
-
-@pytest.mark.parametrize(('params', 'reason'), [
-    ((double('lens.refractive_index', 0.9),), 'lens.refractive_index'),
-    ((double('lens.thickness_mm', -1.0),), 'lens.thickness_mm'),
+#: Refused sets: (id, parameters, text the reason must contain). One parameter goes through
+#: set_parameters (as ``ros2 param set``), several through set_parameters_atomically.
+BAD_SETS = [
+    ('n-0.9', (double('lens.refractive_index', 0.9),), 'lens.refractive_index'),
+    ('t-negative', (double('lens.thickness_mm', -1.0),), 'lens.thickness_mm'),
     # n r2 - n r1 + t (n - 1) = 7.5 - 15 + 7.5 = 0: eq. 8 has no finite focal length.
-    (AFOCAL, 'afocal'),
-    ((double('scene.distance_mm', 3.0),), 'inside the focal length'),
-    ((Parameter('output.interpolation', Parameter.Type.STRING, 'bogus'),), 'bogus'),
-    ((double('lens.stop_offset_mm', float('nan')),), 'nan'),
-    ((double('lens.aperture_diameter_mm', float('inf')),), 'lens.aperture_diameter_mm'),
-    ((Parameter('lens.r1_mm', Parameter.Type.INTEGER, 4),), 'type'),
-    ((Parameter('lens.surfaces.radius_mm', Parameter.Type.DOUBLE_ARRAY, [4.0, -4.0]),
-      Parameter('lens.surfaces.thickness_mm', Parameter.Type.DOUBLE_ARRAY, [3.0]),
-      Parameter('lens.surfaces.refractive_index', Parameter.Type.DOUBLE_ARRAY, [1.5, 1.0])),
+    ('afocal', AFOCAL, 'afocal'),
+    ('scene-inside-f', (double('scene.distance_mm', 3.0),), 'inside the focal length'),
+    ('interpolation-bogus', (Parameter('output.interpolation', Parameter.Type.STRING,
+                                       'bogus'),), 'bogus'),
+    ('nan', (double('lens.stop_offset_mm', float('nan')),), 'nan'),
+    ('inf', (double('lens.aperture_diameter_mm', float('inf')),), 'lens.aperture_diameter_mm'),
+    ('integer-for-double', (Parameter('lens.r1_mm', Parameter.Type.INTEGER, 4),), 'type'),
+    ('array-lengths', (
+        Parameter('lens.surfaces.radius_mm', Parameter.Type.DOUBLE_ARRAY, [4.0, -4.0]),
+        Parameter('lens.surfaces.thickness_mm', Parameter.Type.DOUBLE_ARRAY, [3.0]),
+        Parameter('lens.surfaces.refractive_index', Parameter.Type.DOUBLE_ARRAY, [1.5, 1.0])),
      'one per surface'),
-    ((Parameter('output.width_px', Parameter.Type.INTEGER, 16384),
-      Parameter('output.height_px', Parameter.Type.INTEGER, 16384)), 'Mpx'),
-], ids=['n-0.9', 't-negative', 'afocal', 'scene-inside-f', 'interpolation-bogus', 'nan',
-        'inf', 'integer-for-double', 'array-lengths', 'output-too-big'])
-def test_bad_values_are_refused_and_change_nothing(
-        harness: Harness, outputs: Outputs, params: tuple[Parameter, ...], reason: str) -> None:
-    msg = make_image(test_pattern(*SMALL), 'mono8')
-    before = harness.exchange(outputs, msg)
-    revision = harness.revision()
-    names = [p.name for p in params]
-    current = harness.client.get_parameters(*names)
-    if len(params) == 1:
-        results = harness.client.set_parameters(*params)      # as ros2 param set
-        assert len(results) == 1
-        result = results[0]
-    else:
-        result = harness.client.set_parameters_atomically(*params)
-    assert not result.successful
-    assert reason.lower() in result.reason.lower(), result.reason
-    after = harness.exchange(outputs, msg)
-    npt.assert_array_equal(after['info'].d, before['info'].d)
-    npt.assert_array_equal(after['info_rect'].k, before['info_rect'].k)
-    npt.assert_array_equal(np.frombuffer(after['image'].data, np.uint8),
-                           np.frombuffer(before['image'].data, np.uint8))
-    assert harness.client.get_parameters(*names) == current
-    assert harness.revision() == revision
-    assert harness.proc.running()
+    ('output-too-big', (Parameter('output.width_px', Parameter.Type.INTEGER, 16384),
+                        Parameter('output.height_px', Parameter.Type.INTEGER, 16384)), 'Mpx'),
+]
+
+
+@pytest.fixture(scope='module')
+def refused(harness: Harness) -> dict[str, Any]:
+    """
+    Try every bad set once against the running node; record what happened.
+
+    After each refusal a frame is exchanged and compared with the one before; the model
+    revision is read before the first and after the last (diagnostics come at 1 Hz).
+    """
+    out = Outputs(harness.client)
+    harness.wait_subscribed()
+    try:
+        msg = make_image(test_pattern(*SMALL), 'mono8')
+        before = harness.exchange(out, msg)
+        record: dict[str, Any] = {'revision_before': harness.revision()}
+        for case_id, params, _ in BAD_SETS:
+            names = [p.name for p in params]
+            current = harness.client.get_parameters(*names)
+            if len(params) == 1:
+                results = harness.client.set_parameters(*params)
+                assert len(results) == 1
+                result = results[0]
+            else:
+                result = harness.client.set_parameters_atomically(*params)
+            after = harness.exchange(out, msg)
+            record[case_id] = {
+                'successful': result.successful, 'reason': result.reason,
+                'parameters_kept': harness.client.get_parameters(*names) == current,
+                'same_d': np.array_equal(after['info'].d, before['info'].d),
+                'same_k_new': np.array_equal(after['info_rect'].k, before['info_rect'].k),
+                'same_image': np.array_equal(np.frombuffer(after['image'].data, np.uint8),
+                                             np.frombuffer(before['image'].data, np.uint8)),
+            }
+        record['revision_after'] = harness.revision()
+        record['running'] = harness.proc.running()
+        return record
+    finally:
+        out.close()
+
+
+@pytest.mark.parametrize(('case_id', 'reason'), [(c, r) for c, _, r in BAD_SETS],
+                         ids=[c for c, _, _ in BAD_SETS])
+def test_bad_values_are_refused_with_their_reason(refused: dict[str, Any], case_id: str,
+                                                  reason: str) -> None:
+    case = refused[case_id]
+    assert not case['successful']
+    assert reason.lower() in case['reason'].lower(), case['reason']
+    assert case['parameters_kept'], 'a refused set must not change any parameter'
+    assert case['same_d'] and case['same_k_new'], 'a refused set must not change the model'
+    assert case['same_image'], 'a refused set must not change the output'
+
+
+def test_refused_sets_do_not_rebuild(refused: dict[str, Any]) -> None:
+    assert refused['revision_after'] == refused['revision_before']
+    assert refused['running']
 
 
 def test_double_array_parameters_can_be_set_and_cleared(harness: Harness,
@@ -488,6 +567,10 @@ def test_params_file_arrays_load_and_sigterm_exits_cleanly(tmp_path: Path) -> No
     values.update({'lens.surfaces.radius_mm': [4.0, -4.0], 'lens.surfaces.thickness_mm':
                    [3.0, 0.0], 'lens.surfaces.refractive_index': [1.5168, 1.0],
                    'lazy_subscription': False})
+    # The standard QoS override parameters, as a user matching a reliable driver would write.
+    values.update({'qos_overrides./image_raw.subscription.reliability': 'reliable',
+                   'qos_overrides./image_rect.publisher.reliability': 'reliable',
+                   'qos_overrides./image_rect.publisher.depth': 3})
     params = tmp_path / 'prescription.yaml'
     params.write_text(to_params_yaml(values, node_name='correct_node'))
     domain = next_domain_id()
@@ -498,9 +581,16 @@ def test_params_file_arrays_load_and_sigterm_exits_cleanly(tmp_path: Path) -> No
         assert list(got['lens.surfaces.radius_mm']) == [4.0, -4.0]
         assert list(got['lens.surfaces.thickness_mm']) == [3.0, 0.0]
         assert got['lazy_subscription'] is False
-        pub = client.node.create_publisher(Image, 'image_raw', BEST_EFFORT)
+        reliable = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
+        pub = client.node.create_publisher(Image, 'image_raw', reliable)
         assert client.spin_until(lambda: pub.get_subscription_count() == 1, 5.0), \
             'lazy_subscription false: the node must subscribe without output subscribers'
+        (sub_info,) = client.node.get_subscriptions_info_by_topic('/image_raw')
+        assert sub_info.qos_profile.reliability == ReliabilityPolicy.RELIABLE
+        (pub_info,) = client.node.get_publishers_info_by_topic('/image_rect')
+        assert pub_info.qos_profile.reliability == ReliabilityPolicy.RELIABLE
+        (info_pub,) = client.node.get_publishers_info_by_topic('/camera_info')
+        assert info_pub.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
         code = proc.stop(signal.SIGTERM)
         log = proc.output()
     assert code == 0, log[-3000:]
@@ -567,9 +657,11 @@ _TRANSPORT_SCRIPT = textwrap.dedent("""
         print(sent, flush=True)
     else:
         got = []
-        node.create_subscription(Image, 'transport_test', lambda m: got.append(m.width), qos)
+        node.create_subscription(Image, 'transport_test',
+                                 lambda m: got.append(time.monotonic()), qos)
         deadline = time.monotonic() + seconds
-        while time.monotonic() < deadline:
+        # Until the stream has been quiet for 1 s (or the deadline).
+        while time.monotonic() < deadline and not (got and time.monotonic() - got[-1] > 1.0):
             rclpy.spin_once(node, timeout_sec=0.05)
         print(len(got), flush=True)
     node.destroy_node()
@@ -582,7 +674,7 @@ def test_fastdds_profile_loads_and_carries_720p_rgb8_at_30hz_best_effort(
     env = ros_env(next_domain_id())
     script = tmp_path / 'transport.py'
     script.write_text(_TRANSPORT_SCRIPT)
-    sub = subprocess.Popen([sys.executable, str(script), 'sub', '9'], env=env,
+    sub = subprocess.Popen([sys.executable, str(script), 'sub', '20'], env=env,
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                            start_new_session=True)
     try:

@@ -87,9 +87,9 @@ def params_table() -> str:
             '| --- | --- | --- | --- | --- | --- |']
     for spec in SCHEMA:
         unit = {'': '-', '1': '1'}.get(spec.unit, spec.unit)
+        description = spec.description + (' Read-only.' if spec.read_only else '')
         cells = (f'`{spec.name}`', spec.type.replace('_', ' '), f'`{format_default(spec)}`',
-                 format_range(spec), unit, spec.description + (' Read-only.'
-                                                                if spec.read_only else ''))
+                 format_range(spec), unit, description)
         rows.append('| ' + ' | '.join(_cell(c) for c in cells) + ' |')
     return '\n'.join(rows)
 

@@ -1,0 +1,807 @@
+# Copyright 2026 The mechdeconv_ros Authors.
+# SPDX-License-Identifier: Apache-2.0
+"""
+The ROS 2 node end to end: throughput, latency and parameter-set reaction, vs a pass-through.
+
+Three processes per measurement, all with the Makefile's environment (``MALLOC_*``, discovery
+limited to localhost) and a private ``ROS_DOMAIN_ID``:
+
+* a **publisher** (``python -m benchmarks.node_latency --role publisher``): one prebuilt
+  sensor_msgs/Image (rgb8), ``header.stamp`` set to the wall clock just before each publish,
+  at 30 Hz (paced) or as fast as it can (flat out);
+* the **node under test**: ``python -m mechdeconv_ros.correct_node --ros-args --params-file
+  config/case2.yaml -p sensor.width_px:=0 -p sensor.height_px:=0`` (the sensor size from the
+  frames), or the **pass-through** baseline :mod:`benchmarks.passthrough_node` (subscribe and
+  republish, same QoS, same transport);
+* the **probe**, a subscriber in the benchmark process: ``image_rect`` as raw CDR (it only reads
+  the stamp, so it costs the pipeline as little as possible), ``camera_info``, and the node's
+  ``set_parameters`` service.
+
+Latency = probe receive time - ``header.stamp`` (two hops: publisher -> node -> probe),
+p50/p99 at 30 Hz; throughput = frames the probe received per second with the publisher flat
+out. Each transport runs in its own child benchmark process, because Fast DDS reads its
+profile once per process: ``shm`` = ``FASTRTPS_DEFAULT_PROFILES_FILE=config/fastdds_shm.xml``
+for every process; ``default`` = Fast DDS's builtin transports (UDP + a 512 KiB shared-memory
+segment), 30 Hz only, to show what the profile buys.
+
+Parameter set -> first new frame (shm only): with the publisher at 30 Hz, the probe calls
+``/correct_node/set_parameters`` (as ``ros2 param set`` does) to move ``lens.stop_offset_mm``
+between 0.2 and 0.5 mm, and measures from the reply to the first ``camera_info`` whose D (the
+equivalent distortion of the model that corrected that frame) is the new one.
+
+Targets (DESIGN.md section 4), from the same run: throughput >= 0.8 x min(pass-through fps,
+1 / bare remap time); latency p50 <= pass-through p50 + 1.5 x bare remap time; set ->
+first new frame <= 2 frame periods at 30 fps. The bare remap time is ``Rectifier.correct`` at
+the node's default ``remap_threads`` (1), median, measured in the child before the ROS
+processes start.
+
+Every process is started in its own process group and stopped by SIGINT to the group; exit
+codes are recorded and a non-zero one is reported.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+from pathlib import Path
+import signal
+import statistics
+import struct
+import subprocess
+import sys
+import tempfile
+import time
+from typing import Any, Mapping, Sequence
+
+from benchmarks.common import (
+    fmt_ms, LoadMonitor, log, machine_info, machine_line, markdown_table, RESULTS, write_json)
+
+REPO = Path(__file__).resolve().parents[1]
+CASE2_YAML = REPO / 'config' / 'case2.yaml'
+FASTDDS_PROFILE = REPO / 'config' / 'fastdds_shm.xml'
+#: The Makefile's glibc settings (no per-message mmap/munmap of multi-MB buffers).
+MALLOC_ENV = {'MALLOC_MMAP_THRESHOLD_': '67108864', 'MALLOC_TRIM_THRESHOLD_': '1073741824'}
+SIZES = ((1280, 720), (1920, 1080))
+QUICK_SIZES = ((320, 240),)
+RATE_HZ = 30.0
+WARMUP_S = 1.0
+WINDOW_PACED_S = 4.0
+WINDOW_FLAT_S = 3.0
+SET_REPEATS = 8
+SET_VALUES = (0.5, 0.2)
+STOP_OFFSET = 'lens.stop_offset_mm'
+#: Readiness and first-frame waits, s.
+READY_TIMEOUT_S = 20.0
+FIRST_FRAME_TIMEOUT_S = 6.0
+CHILD_TIMEOUT_S = 400.0
+THROUGHPUT_FACTOR = 0.8
+LATENCY_REMAP_FACTOR = 1.5
+SET_TARGET_PERIODS = 2
+
+
+# ---------------------------------------------------------------------------------------------
+# Processes
+# ---------------------------------------------------------------------------------------------
+
+def ros_env(domain_id: int, transport: str) -> dict[str, str]:
+    """
+    Return the environment of every process of one measurement.
+
+    :param domain_id: the private ROS_DOMAIN_ID.
+    :param transport: ``'shm'`` (the package's Fast DDS profile) or ``'default'``.
+    :return: a copy of ``os.environ`` with the ROS, transport and malloc settings.
+    """
+    env = dict(os.environ)
+    env.update(MALLOC_ENV)
+    env.update({
+        'ROS_DOMAIN_ID': str(domain_id),
+        'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
+        'PYTHONUNBUFFERED': '1',
+        'RCUTILS_COLORIZED_OUTPUT': '0',
+        'PYTHONPATH': os.pathsep.join(
+            [str(REPO)] + [p for p in env.get('PYTHONPATH', '').split(os.pathsep) if p]),
+    })
+    for name in ('ROS_LOCALHOST_ONLY', 'FASTDDS_BUILTIN_TRANSPORTS',
+                 'FASTRTPS_DEFAULT_PROFILES_FILE'):
+        env.pop(name, None)
+    if transport == 'shm':
+        env['FASTRTPS_DEFAULT_PROFILES_FILE'] = str(FASTDDS_PROFILE)
+    return env
+
+
+class Proc:
+    """A process in its own process group, stopped by SIGINT to the group."""
+
+    def __init__(self, argv: Sequence[str], env: Mapping[str, str], log_dir: Path,
+                 name: str) -> None:
+        """Start it; stdout and stderr go to ``log_dir/name.{out,err}``."""
+        self.name = name
+        self.argv = list(argv)
+        self.out_path, self.err_path = log_dir / f'{name}.out', log_dir / f'{name}.err'
+        self._out, self._err = open(self.out_path, 'wb'), open(self.err_path, 'wb')
+        self.proc = subprocess.Popen(self.argv, env=dict(env), stdout=self._out,
+                                     stderr=self._err, stdin=subprocess.DEVNULL,
+                                     start_new_session=True)
+        self.returncode: int | None = None
+        self.killed = False
+
+    @property
+    def pid(self) -> int:
+        """Return the PID (also the process group id)."""
+        return self.proc.pid
+
+    def cpu_s(self) -> float:
+        """Return the CPU seconds (user + system, all threads) used so far; 0 when gone."""
+        try:
+            with open(f'/proc/{self.pid}/stat', encoding='ascii') as stream:
+                fields = stream.read().rsplit(')', 1)[1].split()
+            return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+        except (OSError, IndexError, ValueError):
+            return 0.0
+
+    def running(self) -> bool:
+        """Return True while it runs."""
+        return self.proc.poll() is None
+
+    def stop(self, timeout: float = 15.0) -> int:
+        """
+        SIGINT the process group, wait; SIGKILL the group after ``timeout``.
+
+        :return: the exit code (negative: ended by a signal).
+        """
+        if self.proc.poll() is None:
+            try:
+                os.killpg(self.pid, signal.SIGINT)
+            except ProcessLookupError:
+                pass
+            try:
+                self.proc.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                self.killed = True
+                try:
+                    os.killpg(self.pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+        self.returncode = self.proc.wait()
+        for stream in (self._out, self._err):
+            if not stream.closed:
+                stream.close()
+        return self.returncode
+
+    def stdout(self) -> str:
+        """Return what it printed on stdout."""
+        return self.out_path.read_text(errors='replace')
+
+    def stderr_tail(self, lines: int = 15) -> str:
+        """Return the last lines of its stderr."""
+        return '\n'.join(self.err_path.read_text(errors='replace').splitlines()[-lines:])
+
+
+def node_argv(kind: str) -> list[str]:
+    """Return the command of the node under test (``'node'``) or of the pass-through."""
+    if kind == 'node':
+        return [sys.executable, '-m', 'mechdeconv_ros.correct_node', '--ros-args',
+                '--params-file', str(CASE2_YAML), '-p', 'sensor.width_px:=0',
+                '-p', 'sensor.height_px:=0']
+    return [sys.executable, '-m', 'benchmarks.passthrough_node']
+
+
+def publisher_argv(width: int, height: int, rate_hz: float) -> list[str]:
+    """Return the command of the publisher (rate 0 = flat out)."""
+    return [sys.executable, '-m', 'benchmarks.node_latency', '--role', 'publisher',
+            '--width', str(width), '--height', str(height), '--rate', str(rate_hz)]
+
+
+# ---------------------------------------------------------------------------------------------
+# The publisher process
+# ---------------------------------------------------------------------------------------------
+
+def publisher_main(width: int, height: int, rate_hz: float) -> int:
+    """Publish a prebuilt rgb8 Image on ``image_raw`` until SIGINT; print counts as JSON."""
+    import numpy as np
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+    from rclpy.node import Node
+    from sensor_msgs.msg import Image
+
+    from benchmarks.passthrough_node import sensor_qos
+    from mechdeconv_ros.image_msgs import new_output_image
+
+    rclpy.init()
+    node = Node('bench_camera')
+    pub = node.create_publisher(Image, 'image_raw', sensor_qos())
+    out = new_output_image(width, height, 'rgb8')
+    y, x = np.mgrid[0:height, 0:width]
+    out.pixels[...] = ((x[..., None] * 3 + y[..., None] * 5 + np.arange(3) * 80) % 256
+                       ).astype(np.uint8)
+    msg = out.msg
+    msg.header.frame_id = 'bench_optical_frame'
+    period = 1.0 / rate_hz if rate_hz > 0 else 0.0
+    count = 0
+    start = time.monotonic()
+    next_t = start
+    try:
+        while rclpy.ok():
+            if period:
+                delay = next_t - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+                next_t += period
+                if time.monotonic() - next_t > period:       # fell behind: do not burst
+                    next_t = time.monotonic()
+            now = time.time_ns()
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(now, 1_000_000_000)
+            pub.publish(msg)
+            count += 1
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except Exception:          # noqa: B902 - publish() on a context shut down by SIGINT
+        if rclpy.ok():
+            raise
+    seconds = time.monotonic() - start
+    print(json.dumps({'published': count, 'seconds': seconds}), flush=True)
+    node.destroy_node()
+    rclpy.try_shutdown()
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------
+# The probe (subscriber in the benchmark process)
+# ---------------------------------------------------------------------------------------------
+
+class Probe:
+    """Subscriber and parameter client on the benchmark's domain."""
+
+    def __init__(self, domain_id: int) -> None:
+        """Create the context, the node, the subscriptions and the service client."""
+        import rclpy
+        from rclpy.context import Context
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.node import Node
+        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+        from rcl_interfaces.srv import SetParameters
+        from sensor_msgs.msg import CameraInfo, Image
+
+        self._rclpy = rclpy
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain_id)
+        self.node = Node('bench_probe', context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5,
+                         reliability=ReliabilityPolicy.BEST_EFFORT)
+        self.node.create_subscription(Image, 'image_rect', self._on_image, qos, raw=True)
+        self.node.create_subscription(CameraInfo, 'camera_info', self._on_info, qos)
+        self.set_client = self.node.create_client(SetParameters,
+                                                  '/correct_node/set_parameters')
+        self.frames: list[tuple[int, int]] = []        # (receive ns, stamp ns)
+        self.infos: list[tuple[float, tuple[float, ...]]] = []    # (monotonic, D)
+        self.recording = False
+
+    def _on_image(self, data: bytes) -> None:
+        if self.recording:
+            now = time.time_ns()
+            # CDR: 4-byte encapsulation header, then header.stamp (int32 sec, uint32 nanosec).
+            little = data[1] == 1
+            sec, nsec = struct.unpack_from('<iI' if little else '>iI', data, 4)
+            self.frames.append((now, sec * 1_000_000_000 + nsec))
+
+    def _on_info(self, msg: Any) -> None:
+        self.infos.append((time.monotonic(), tuple(float(v) for v in msg.d)))
+        if len(self.infos) > 4096:
+            del self.infos[:2048]
+
+    def spin_for(self, seconds: float) -> None:
+        """Spin the probe for a while."""
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            self.executor.spin_once(timeout_sec=min(0.02, max(0.0, deadline - time.monotonic())))
+
+    def spin_until(self, predicate: Any, timeout: float) -> bool:
+        """Spin until ``predicate()`` or the timeout; return the predicate."""
+        deadline = time.monotonic() + timeout
+        while not predicate():
+            if time.monotonic() > deadline:
+                return bool(predicate())
+            self.executor.spin_once(timeout_sec=0.02)
+        return True
+
+    def ready(self, timeout: float) -> bool:
+        """Wait until something subscribes ``image_raw`` and publishes ``image_rect``."""
+        return self.spin_until(lambda: self.node.count_subscribers('/image_raw') > 0
+                               and self.node.count_publishers('/image_rect') > 0, timeout)
+
+    def first_frame(self, timeout: float) -> bool:
+        """Record until a frame arrives (or the timeout); return whether one did."""
+        self.frames.clear()
+        self.recording = True
+        return self.spin_until(lambda: len(self.frames) > 0, timeout)
+
+    def measure(self, seconds: float) -> list[tuple[int, int]]:
+        """Record frames for ``seconds``; return ``(receive ns, stamp ns)`` pairs."""
+        self.frames.clear()
+        self.recording = True
+        self.spin_for(seconds)
+        self.recording = False
+        return list(self.frames)
+
+    def set_stop_offset(self, value: float, timeout: float = 5.0) -> dict[str, Any]:
+        """
+        Set ``lens.stop_offset_mm`` as ``ros2 param set`` does; time the first new frame.
+
+        :return: reply time, reply -> first camera_info with a new D, and frames in between.
+        """
+        from rcl_interfaces.srv import SetParameters
+        from rclpy.parameter import Parameter
+
+        if not self.spin_until(lambda: bool(self.infos), timeout):
+            return {'value': value, 'error': 'no camera_info before the set'}
+        old_d = self.infos[-1][1]
+        request = SetParameters.Request(
+            parameters=[Parameter(STOP_OFFSET, value=float(value)).to_parameter_msg()])
+        if not self.set_client.wait_for_service(timeout_sec=timeout):
+            return {'value': value, 'error': 'set_parameters service not available'}
+        mark = len(self.infos)
+        sent = time.monotonic()
+        future = self.set_client.call_async(request)
+        if not self.spin_until(future.done, timeout):
+            return {'value': value, 'error': 'no reply'}
+        replied = time.monotonic()
+        result = future.result().results[0]
+        if not result.successful:
+            return {'value': value, 'error': f'rejected: {result.reason}'}
+
+        def new_info() -> tuple[float, tuple[float, ...]] | None:
+            return next((i for i in self.infos[mark:] if i[1] != old_d), None)
+
+        if not self.spin_until(lambda: new_info() is not None, timeout):
+            return {'value': value, 'error': 'no frame of the new model', 'reply_ms':
+                    (replied - sent) * 1e3}
+        first = new_info()
+        assert first is not None
+        between = sum(1 for t, d in self.infos[mark:] if t >= replied and d == old_d)
+        return {'value': value, 'reply_ms': (replied - sent) * 1e3,
+                'reply_to_first_new_frame_ms': (first[0] - replied) * 1e3,
+                'send_to_first_new_frame_ms': (first[0] - sent) * 1e3,
+                'old_model_frames_after_reply': between}
+
+    def close(self) -> None:
+        """Destroy the node and shut the context down."""
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self._rclpy.try_shutdown(context=self.context)
+
+
+def latency_stats(frames: Sequence[tuple[int, int]], seconds: float) -> dict[str, Any]:
+    """Return fps, and latency p50/p90/p99/max (ms) of received frames."""
+    out: dict[str, Any] = {'frames': len(frames), 'fps': len(frames) / seconds}
+    if frames:
+        lat = sorted((r - s) * 1e-6 for r, s in frames)
+        for q in (50, 90, 99):
+            out[f'p{q}_ms'] = lat[min(len(lat) - 1, int(round(q / 100 * (len(lat) - 1))))]
+        out['max_ms'] = lat[-1]
+        out['mean_ms'] = statistics.fmean(lat)
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# The child benchmark process (one transport)
+# ---------------------------------------------------------------------------------------------
+
+def bare_remap_ms(width: int, height: int, reps: int) -> dict[str, float]:
+    """Time Rectifier.correct (rgb8, 1 thread: the node default) at one size."""
+    import cv2
+    import numpy as np
+
+    from benchmarks.common import time_ms
+    from mechdeconv_ros.model import build_model
+    from mechdeconv_ros.params import load_params_file
+    from mechdeconv_ros.remap import Rectifier
+
+    values = load_params_file(CASE2_YAML)
+    values.update({'sensor.width_px': 0, 'sensor.height_px': 0})
+    rect = Rectifier(build_model(values, width, height))
+    src = np.random.default_rng(0).integers(0, 256, (height, width, 3), dtype=np.uint8)
+    dst = np.empty_like(src)
+    previous = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        rect.correct(src, dst)
+        samples = time_ms(lambda: rect.correct(src, dst), reps)
+    finally:
+        cv2.setNumThreads(previous)
+    return {'median_ms': statistics.median(samples), 'min_ms': min(samples), 'reps': reps}
+
+
+def _run_window(probe: Probe, kind_proc: Proc, pub: Proc, seconds: float) -> dict[str, Any]:
+    """Warm up, then measure one window with the CPU use of each process."""
+    got_first = probe.first_frame(FIRST_FRAME_TIMEOUT_S)
+    probe.spin_for(WARMUP_S)
+    cpu0 = {'node': kind_proc.cpu_s(), 'publisher': pub.cpu_s()}
+    probe_cpu0 = time.process_time()
+    monitor = LoadMonitor(lambda: time.process_time() + kind_proc.cpu_s() + pub.cpu_s())
+    wall0 = time.monotonic()
+    frames = probe.measure(seconds)
+    wall = time.monotonic() - wall0
+    stats = latency_stats(frames, seconds)
+    stats.update({
+        'first_frame_seen': got_first,
+        'node_cores': (kind_proc.cpu_s() - cpu0['node']) / wall,
+        'publisher_cores': (pub.cpu_s() - cpu0['publisher']) / wall,
+        'probe_cores': (time.process_time() - probe_cpu0) / wall,
+        'others_cores': monitor.others_cores(),
+    })
+    if stats['fps'] > 0:
+        stats['node_cpu_ms_per_frame'] = stats['node_cores'] * 1000.0 / stats['fps']
+    return stats
+
+
+def child_main(transport: str, quick: bool, out_json: Path) -> int:
+    """Measure one transport (this process's Fast DDS profile is fixed by its environment)."""
+    sizes = QUICK_SIZES if quick else SIZES
+    paced_s, flat_s = (1.0, 1.0) if quick else (WINDOW_PACED_S, WINDOW_FLAT_S)
+    rates = (RATE_HZ,) if transport == 'default' else (RATE_HZ, 0.0)
+    if quick:
+        rates = (RATE_HZ,)
+    repeats = 2 if quick else SET_REPEATS
+    env = dict(os.environ)
+    domain = int(env['ROS_DOMAIN_ID'])
+    doc: dict[str, Any] = {'transport': transport, 'domain_id': domain,
+                           'fastdds_profile': env.get('FASTRTPS_DEFAULT_PROFILES_FILE'),
+                           'malloc_env': {k: env.get(k) for k in MALLOC_ENV},
+                           'bare_remap': {}, 'runs': [], 'set_parameters': [],
+                           'exit_codes': [], 'errors': []}
+    for width, height in sizes:
+        doc['bare_remap'][f'{width}x{height}'] = bare_remap_ms(
+            width, height, 5 if quick else 40)
+    log_dir = Path(tempfile.mkdtemp(prefix=f'mechdeconv_bench_{transport}_'))
+    doc['log_dir'] = str(log_dir)
+    probe = Probe(domain)
+    running: list[Proc] = []
+
+    def stop(proc: Proc) -> None:
+        code = proc.stop()
+        if proc in running:
+            running.remove(proc)
+        doc['exit_codes'].append({'process': proc.name, 'exit_code': code,
+                                  'killed': proc.killed})
+        if code != 0 or proc.killed:
+            doc['errors'].append(f'{proc.name} exited with {code}: {proc.stderr_tail()}')
+
+    try:
+        for width, height in sizes:
+            size = f'{width}x{height}'
+            for kind in ('passthrough', 'node'):
+                name = f'{kind}_{size}'
+                kind_proc = Proc(node_argv(kind), env, log_dir, name)
+                running.append(kind_proc)
+                ready = probe.ready(READY_TIMEOUT_S)
+                if not ready:
+                    doc['errors'].append(f'{name}: not ready after {READY_TIMEOUT_S} s: '
+                                         f'{kind_proc.stderr_tail()}')
+                for rate in rates:
+                    label = 'flat out' if rate == 0 else f'{rate:g} Hz'
+                    pub = Proc(publisher_argv(width, height, rate), env, log_dir,
+                               f'publisher_{name}_{label.replace(" ", "_")}')
+                    running.append(pub)
+                    stats = _run_window(probe, kind_proc, pub,
+                                        flat_s if rate == 0 else paced_s)
+                    stop(pub)
+                    try:
+                        published = json.loads(pub.stdout().strip().splitlines()[-1])
+                    except (ValueError, IndexError):
+                        published = {}
+                    if published.get('seconds'):
+                        stats['published_fps'] = published['published'] / published['seconds']
+                    stats.update({'size': size, 'kind': kind, 'rate': label,
+                                  'rate_hz': rate, 'transport': transport})
+                    doc['runs'].append(stats)
+                    log(f'node_latency [{transport}] {kind:11s} {size} {label:8s}: '
+                        f"{stats['fps']:.1f} fps (published "
+                        f"{stats.get('published_fps', math.nan):.1f}), p50 "
+                        f"{stats.get('p50_ms', math.nan):.1f} ms, p99 "
+                        f"{stats.get('p99_ms', math.nan):.1f} ms, node "
+                        f"{stats['node_cores']:.2f} cores")
+                if kind == 'node' and transport == 'shm':
+                    pub = Proc(publisher_argv(width, height, RATE_HZ), env, log_dir,
+                               f'publisher_{name}_set_parameters')
+                    running.append(pub)
+                    probe.first_frame(FIRST_FRAME_TIMEOUT_S)
+                    probe.spin_for(WARMUP_S)
+                    for i in range(repeats):
+                        result = probe.set_stop_offset(SET_VALUES[i % len(SET_VALUES)])
+                        result['size'] = size
+                        doc['set_parameters'].append(result)
+                        probe.spin_for(0.3)
+                    stop(pub)
+                    done = [r['reply_to_first_new_frame_ms'] for r in doc['set_parameters']
+                            if r['size'] == size and 'reply_to_first_new_frame_ms' in r]
+                    log(f'node_latency [{transport}] set_parameters {size}: reply -> first '
+                        f'new frame {", ".join(f"{v:.0f}" for v in done)} ms')
+                stop(kind_proc)
+    finally:
+        for proc in list(running):
+            stop(proc)
+        probe.close()
+        write_json(out_json, doc)
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------
+# The benchmark (parent): one child per transport, then targets, figure, tables
+# ---------------------------------------------------------------------------------------------
+
+def _domain_id(offset: int) -> int:
+    """Return a private ROS_DOMAIN_ID (120-219, apart from the tests' 1-100)."""
+    return 120 + (os.getpid() + 37 * offset) % 100
+
+
+def _find(runs: Sequence[Mapping[str, Any]], **match: Any) -> Mapping[str, Any] | None:
+    return next((r for r in runs if all(r.get(k) == v for k, v in match.items())), None)
+
+
+def evaluate(children: Mapping[str, Mapping[str, Any]]) -> dict[str, Any]:
+    """Return the targets per size (shm transport) and what the profile buys."""
+    out: dict[str, Any] = {}
+    shm = children.get('shm')
+    if not shm:
+        return out
+    for size, remap in shm['bare_remap'].items():
+        runs = shm['runs']
+        node_flat = _find(runs, kind='node', size=size, rate='flat out')
+        pass_flat = _find(runs, kind='passthrough', size=size, rate='flat out')
+        node_paced = _find(runs, kind='node', size=size, rate_hz=RATE_HZ)
+        pass_paced = _find(runs, kind='passthrough', size=size, rate_hz=RATE_HZ)
+        entry: dict[str, Any] = {'bare_remap_ms': remap['median_ms']}
+        if node_flat and pass_flat:
+            limit = min(pass_flat['fps'], 1000.0 / remap['median_ms'])
+            # A relay that receives, remaps and publishes one frame at a time (no overlap of
+            # the remap with the transport) cannot beat 1 / (pass-through time + remap time).
+            serial = 1000.0 / (1000.0 / pass_flat['fps'] + remap['median_ms']) \
+                if pass_flat['fps'] > 0 else math.nan
+            entry.update({'node_fps': node_flat['fps'], 'passthrough_fps': pass_flat['fps'],
+                          'remap_fps': 1000.0 / remap['median_ms'],
+                          'serial_bound_fps': serial,
+                          'node_over_serial_bound': node_flat['fps'] / serial,
+                          'throughput_target_fps': THROUGHPUT_FACTOR * limit,
+                          'throughput_ratio': node_flat['fps'] / limit,
+                          'throughput_met': node_flat['fps'] >= THROUGHPUT_FACTOR * limit})
+        if node_paced and pass_paced and 'p50_ms' in node_paced and 'p50_ms' in pass_paced:
+            target = pass_paced['p50_ms'] + LATENCY_REMAP_FACTOR * remap['median_ms']
+            entry.update({'node_p50_ms': node_paced['p50_ms'],
+                          'passthrough_p50_ms': pass_paced['p50_ms'],
+                          'latency_target_ms': target,
+                          'latency_met': node_paced['p50_ms'] <= target,
+                          'latency_over_target_ms': node_paced['p50_ms'] - target})
+        sets = [r['reply_to_first_new_frame_ms'] for r in shm['set_parameters']
+                if r.get('size') == size and 'reply_to_first_new_frame_ms' in r]
+        failures = [r for r in shm['set_parameters'] if r.get('size') == size and 'error' in r]
+        if sets or failures:
+            target = SET_TARGET_PERIODS * 1000.0 / RATE_HZ
+            entry.update({'set_to_new_frame_median_ms': statistics.median(sets) if sets
+                          else math.nan,
+                          'set_to_new_frame_max_ms': max(sets) if sets else math.nan,
+                          'set_to_new_frame_target_ms': target,
+                          'set_failures': len(failures),
+                          'set_met_median': bool(sets) and not failures
+                          and statistics.median(sets) <= target,
+                          'set_met_all': bool(sets) and not failures and max(sets) <= target})
+        out[size] = entry
+    return out
+
+
+def run(out_dir: Path = RESULTS, quick: bool = False, plots: bool = True,
+        transports: Sequence[str] = ('shm', 'default')) -> dict[str, Any]:
+    """
+    Run the node benchmark; write ``node_latency.json`` (and the figure) into ``out_dir``.
+
+    :param out_dir: results folder.
+    :param quick: one small size, short windows, shm only unless ``transports`` says more.
+    :param plots: write the PNG figure.
+    :param transports: which transports to measure.
+    :return: the results document.
+    """
+    if quick and tuple(transports) == ('shm', 'default'):
+        transports = ('shm',)
+    children: dict[str, Any] = {}
+    errors: list[str] = []
+    log_dir = Path(tempfile.mkdtemp(prefix='mechdeconv_bench_children_'))
+    for i, transport in enumerate(transports):
+        out_json = log_dir / f'{transport}.json'
+        argv = [sys.executable, '-m', 'benchmarks.node_latency', '--child',
+                '--transport', transport, '--out-json', str(out_json)]
+        if quick:
+            argv.append('--quick')
+        child = Proc(argv, ros_env(_domain_id(i), transport), log_dir, f'child_{transport}')
+        start = time.monotonic()
+        while child.running() and time.monotonic() - start < CHILD_TIMEOUT_S:
+            time.sleep(0.2)
+        code = child.stop()
+        if code != 0:
+            errors.append(f'child {transport} exited with {code}: {child.stderr_tail()}')
+        if out_json.exists():
+            children[transport] = json.loads(out_json.read_text())
+            errors += [f'[{transport}] {e}' for e in children[transport]['errors']]
+        sys.stderr.write(child.err_path.read_text(errors='replace'))
+    doc = {
+        'benchmark': 'node_latency',
+        'machine': machine_info(),
+        'method': __doc__,
+        'rate_hz': RATE_HZ,
+        'windows_s': {'paced': 1.0 if quick else WINDOW_PACED_S,
+                      'flat_out': 1.0 if quick else WINDOW_FLAT_S, 'warmup': WARMUP_S},
+        'children': children,
+        'targets': evaluate(children),
+        'errors': errors,
+    }
+    if plots and children:
+        doc['figures'] = {'node': write_plot(doc, out_dir)}
+    write_json(out_dir / 'node_latency.json', doc)
+    return doc
+
+
+# ---------------------------------------------------------------------------------------------
+# Figure and tables
+# ---------------------------------------------------------------------------------------------
+
+def write_plot(doc: Mapping[str, Any], out_dir: Path) -> str:
+    """Write throughput, latency and parameter-set reaction in one figure."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.6))
+    runs = [r for child in doc['children'].values() for r in child['runs']]
+    sizes = sorted({r['size'] for r in runs}, key=lambda s: int(s.split('x')[0]))
+    x = np.arange(len(sizes))
+    bars = (('passthrough', 'shm', 'pass-through, shm profile', 'tab:gray'),
+            ('node', 'shm', 'correct_node, shm profile', 'tab:blue'),
+            ('passthrough', 'default', 'pass-through, default transports', 'silver'),
+            ('node', 'default', 'correct_node, default transports', 'lightsteelblue'))
+    for ax, rate, metric, title in (
+            (axes[0], 'flat out', 'fps', 'throughput, publisher flat out [fps]'),
+            (axes[1], f'{RATE_HZ:g} Hz', 'p50_ms', f'latency at {RATE_HZ:g} Hz: p50 (bar), '
+                                                   'p99 (tick) [ms]')):
+        for i, (kind, transport, label, color) in enumerate(bars):
+            vals, p99 = [], []
+            for size in sizes:
+                run = _find(runs, kind=kind, size=size, rate=rate, transport=transport)
+                vals.append(run.get(metric, math.nan) if run else math.nan)
+                p99.append(run.get('p99_ms', math.nan) if run else math.nan)
+            if all(not math.isfinite(v) for v in vals):
+                continue
+            pos = x + (i - 1.5) * 0.2
+            ax.bar(pos, np.nan_to_num(vals), 0.2, color=color, label=label)
+            if metric == 'p50_ms':
+                ax.plot(pos, p99, '_', color='k', ms=12)
+        if metric == 'fps':
+            for j, size in enumerate(sizes):
+                target = doc['targets'].get(size, {}).get('throughput_target_fps')
+                if target:
+                    ax.plot([j - 0.4, j + 0.4], [target, target], 'r--', lw=1)
+        else:
+            for j, size in enumerate(sizes):
+                target = doc['targets'].get(size, {}).get('latency_target_ms')
+                if target:
+                    ax.plot([j - 0.4, j + 0.4], [target, target], 'r--', lw=1)
+        ax.set_xticks(x, sizes)
+        ax.set_title(title + ' (red: target)')
+        ax.grid(axis='y', alpha=0.3)
+    for ax in axes[:2]:
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=8)
+    ax = axes[2]
+    sets = [r for r in doc['children'].get('shm', {}).get('set_parameters', [])
+            if 'reply_to_first_new_frame_ms' in r]
+    for j, size in enumerate(sizes):
+        vals = [r['reply_to_first_new_frame_ms'] for r in sets if r['size'] == size]
+        ax.plot([j] * len(vals), vals, 'o', color='tab:blue', alpha=0.7)
+    ax.axhline(SET_TARGET_PERIODS * 1000.0 / RATE_HZ, color='r', ls='--', lw=1,
+               label='target: 2 frame periods at 30 fps')
+    ax.set_xticks(range(len(sizes)), sizes)
+    ax.set_xlim(-0.5, len(sizes) - 0.5)
+    ax.set_title('set_parameters reply -> first frame of the new model [ms]')
+    ax.grid(axis='y', alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    path = out_dir / 'node_latency.png'
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return str(path.relative_to(out_dir.parent))
+
+
+def _f(value: Any, digits: int = 1) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return '-'
+    return f'{value:.{digits}f}'
+
+
+def _set_cell(t: Mapping[str, Any]) -> str:
+    if 'set_to_new_frame_target_ms' not in t:
+        return '-'
+    verdict = ('met' if t.get('set_met_all') else
+               'median met' if t.get('set_met_median') else 'MISSED')
+    return (f"{_f(t.get('set_to_new_frame_median_ms'))} / "
+            f"{_f(t.get('set_to_new_frame_max_ms'))} vs <= "
+            f"{_f(t.get('set_to_new_frame_target_ms'))}: {verdict}")
+
+
+def tables(doc: Mapping[str, Any]) -> list[str]:
+    """Return the markdown lines of the node section."""
+    lines = ['### The node end to end (publisher -> node -> subscriber, rgb8, best effort)', '',
+             'Three processes on the 2 vCPUs; latency = subscriber receive time - stamp set '
+             f'by the publisher (two hops), at {RATE_HZ:g} Hz; throughput with the publisher '
+             'flat out. Pass-through = subscribe + republish (same QoS, same transport). '
+             'shm = config/fastdds_shm.xml in every process; default = Fast DDS builtin '
+             'transports. All with the Makefile MALLOC_* settings.', '']
+    rows = []
+    for transport, child in doc['children'].items():
+        for run in child['runs']:
+            rows.append([run['size'], transport, run['kind'], run['rate'],
+                         _f(run.get('published_fps')), _f(run['fps']), _f(run.get('p50_ms')),
+                         _f(run.get('p99_ms')), _f(run['node_cores'], 2),
+                         _f(run.get('node_cpu_ms_per_frame')), _f(run['others_cores'], 2)])
+    lines += markdown_table(['frame', 'transport', 'relay', 'publisher', 'published fps',
+                             'delivered fps', 'latency p50 ms', 'p99 ms', 'relay cores',
+                             'relay CPU ms/frame', 'others cores'], rows)
+    lines += ['', 'Targets (shm profile, same run):', '']
+    rows = []
+    for size, t in doc['targets'].items():
+        rows.append([
+            size, fmt_ms(t['bare_remap_ms']),
+            f"{_f(t.get('node_fps'))} vs >= {_f(t.get('throughput_target_fps'))}: "
+            f"{'met' if t.get('throughput_met') else 'MISSED'} (serial bound "
+            f"{_f(t.get('serial_bound_fps'))})"
+            if 'node_fps' in t else '-',
+            f"{_f(t.get('node_p50_ms'))} vs <= {_f(t.get('latency_target_ms'))}: "
+            f"{'met' if t.get('latency_met') else 'MISSED'}"
+            if 'node_p50_ms' in t else '-',
+            _set_cell(t)])
+    notes = ['', 'Serial bound = 1 / (1 / pass-through fps + bare remap time): the most a '
+             "relay can forward when it does the pass-through's work and then the remap, one "
+             'frame at a time; with the publisher flat out on one of the two cores there is '
+             'no spare core to overlap them.']
+    lines += markdown_table(['frame', 'bare remap ms (1 thread, median)',
+                             'node fps (flat out) vs 0.8 x min(pass-through, 1/remap)',
+                             'node p50 ms vs pass-through p50 + 1.5 x remap',
+                             'param set -> first new frame ms (median / max)'], rows)
+    lines += notes
+    if doc['errors']:
+        lines += ['', 'Errors: ' + '; '.join(e.splitlines()[0] for e in doc['errors'])]
+    figs = doc.get('figures') or {}
+    if 'node' in figs:
+        lines += ['', f"![node throughput and latency]({figs['node']}) Node throughput, "
+                  'latency and parameter-set reaction against the pass-through, with and '
+                  'without the shared-memory profile.']
+    lines += ['', f"Machine: {machine_line(doc['machine'])}.", '']
+    return lines
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Dispatch: the benchmark, its per-transport child, or the publisher."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0].strip())
+    parser.add_argument('--role', choices=('benchmark', 'publisher'), default='benchmark')
+    parser.add_argument('--child', action='store_true', help='measure one transport')
+    parser.add_argument('--transport', choices=('shm', 'default'), default='shm')
+    parser.add_argument('--out-json', type=Path)
+    parser.add_argument('--quick', action='store_true')
+    parser.add_argument('--out', type=Path, default=RESULTS, help='results folder')
+    parser.add_argument('--width', type=int, default=640)
+    parser.add_argument('--height', type=int, default=480)
+    parser.add_argument('--rate', type=float, default=RATE_HZ, help='Hz; 0 = flat out')
+    args = parser.parse_args(argv)
+    if args.role == 'publisher':
+        return publisher_main(args.width, args.height, args.rate)
+    if args.child:
+        return child_main(args.transport, args.quick, args.out_json)
+    doc = run(args.out, quick=args.quick)
+    print('\n'.join(tables(doc)))
+    return 0 if not doc['errors'] else 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,97 @@
+# Copyright 2026 The mechdeconv_ros Authors.
+# SPDX-License-Identifier: Apache-2.0
+"""
+Smoke runs of the benchmarks (tiny sizes, one repetition), so CI proves they run.
+
+The numbers of a smoke run mean nothing; what is checked is that each benchmark completes,
+writes its JSON, figures and tables, and that the pieces whose correctness the real run relies
+on are right: the Brown model's analytic Jacobian and its Gauss-Newton calibration, the
+accuracy pipeline (the mechanistic model meets its target on the optiland ground truth, the
+calibrated model degrades when the lens thickens), and the ROS pipeline (every process exits
+with code 0, frames arrive, a parameter set reaches the frames).
+"""
+
+from __future__ import annotations
+
+import json
+
+from benchmarks import accuracy, node_latency, run_all, speed
+import numpy as np
+from numpy.testing import assert_allclose
+import pytest
+
+THETA = np.array([1100.0, 1000.0, 319.5, 239.5, -0.12, 0.03, 2e-4, -3e-4])
+
+
+def _raw_grid() -> np.ndarray:
+    u, v = np.meshgrid(np.linspace(10, 630, 12), np.linspace(10, 470, 9))
+    return np.stack([u.ravel(), v.ravel()], axis=1)
+
+
+def test_brown_jacobian_is_the_derivative():
+    """The analytic Jacobian of the Brown correction equals central differences."""
+    raw = _raw_grid()
+    _, analytic = accuracy.brown_correct(THETA, raw, jacobian=True)
+    numeric = accuracy.numeric_jacobian(THETA, raw)
+    assert_allclose(analytic, numeric, rtol=1e-5, atol=1e-9)
+
+
+def test_gauss_newton_recovers_a_known_brown_model():
+    """Calibrating on points made by a known model returns that model, in a few iterations."""
+    raw = _raw_grid()
+    ideal, _ = accuracy.brown_correct(THETA, raw)
+    cal = accuracy.calibrate_brown(raw, ideal)
+    assert cal['converged']
+    assert cal['iterations'] <= 10
+    assert_allclose(cal['model'].params, THETA, rtol=1e-7, atol=1e-10)
+
+
+def test_accuracy_quick(tmp_path):
+    doc = accuracy.run(tmp_path, quick=True)
+    saved = json.loads((tmp_path / 'accuracy.json').read_text())
+    assert saved['machine']['nproc'] >= 1
+    assert doc['target_met'], doc['mechanistic_worst_percent']
+    thick = doc['sweeps']['thickness'][-1]
+    assert thick['thickness_mm'] == pytest.approx(5.0)
+    # A 10 % longer focal length: the calibrated model is off by several percent.
+    assert thick['brown']['radii_mean_error_percent'] > 1.0
+    assert thick['mechanistic']['radii_mean_error_percent'] < accuracy.TARGET_PERCENT
+    for name in ('accuracy_stop_offset.png', 'accuracy_thickness.png', 'accuracy_both.png',
+                 'accuracy_grid.png'):
+        assert (tmp_path / name).stat().st_size > 1000, name
+    assert any('radii mean error' in line for line in accuracy.tables(doc))
+
+
+def test_speed_quick(tmp_path):
+    doc = speed.run(tmp_path, quick=True)
+    (key, frame), = [(k, v) for k, v in doc['per_frame'].items() if 'rgb8' in k]
+    ratios = frame['ratios']['min']
+    assert 0.0 < ratios['ours_over_opencv_best'] < 100.0
+    # Our maps and OpenCV's from the equivalent D describe the same correction.
+    assert frame['map_agreement_px'] < 0.5
+    assert (tmp_path / 'speed.json').exists()
+    assert (tmp_path / 'speed_per_frame.png').stat().st_size > 1000
+    assert (tmp_path / 'raw' / 'speed_samples.json').exists()
+    assert any(key in line for line in speed.tables(doc))
+
+
+@pytest.mark.ros
+def test_node_latency_quick(tmp_path):
+    doc = node_latency.run(tmp_path, quick=True)
+    assert doc['errors'] == []
+    child = doc['children']['shm']
+    assert all(e['exit_code'] == 0 for e in child['exit_codes']), child['exit_codes']
+    assert {r['kind'] for r in child['runs']} == {'passthrough', 'node'}
+    assert all(r['fps'] > 5.0 for r in child['runs']), child['runs']
+    sets = [r for r in child['set_parameters'] if 'reply_to_first_new_frame_ms' in r]
+    assert sets, child['set_parameters']
+    assert (tmp_path / 'node_latency.json').exists()
+    assert any('pass-through' in line for line in node_latency.tables(doc))
+
+
+def test_run_all_writes_the_readme_tables(tmp_path):
+    lines, summary = run_all.run_all(tmp_path, quick=True, only=('accuracy',), wait_load_s=0)
+    text = (tmp_path / 'README_tables.md').read_text()
+    assert text.startswith('## Benchmarks')
+    assert 'accuracy_thickness.png' in text
+    assert summary['durations_s']['accuracy'] > 0

@@ -1,0 +1,132 @@
+# Copyright 2026 The mechdeconv_ros Authors.
+# SPDX-License-Identifier: Apache-2.0
+"""
+Build the package with colcon as a ROS user would, then run the INSTALLED correct_node.
+
+colcon comes from the Python environment running the tests (``colcon`` next to
+``sys.executable``: ``/tmp/v1/bin/colcon`` here, ``.venv/bin/colcon`` in CI). Build, install and
+log bases are in the test's temporary directory, so the repository stays clean. Nothing can be
+sourced here, so the test sets what ``install/setup.bash`` would: PYTHONPATH to the install's
+site-packages (and AMENT_PREFIX_PATH), with the repository itself NOT on the path, so the node
+that runs is the installed one.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import sysconfig
+
+from mechdeconv_ros.image_msgs import image_to_array
+import numpy as np
+import pytest
+from rclpy.parameter import Parameter
+from ros_helpers import (
+    BEST_EFFORT, make_image, next_domain_id, node_command, NodeProcess, REPO, ros_env,
+    RosClient, stamp_of)
+from sensor_msgs.msg import CameraInfo, Image
+
+PACKAGE = 'mechdeconv_ros'
+
+
+def find_colcon() -> Path:
+    """Return the colcon executable of the Python environment running the tests."""
+    candidate = Path(sys.executable).parent / 'colcon'
+    if not candidate.exists():
+        pytest.fail(f'colcon is not installed next to {sys.executable} '
+                    '(requirements-test.txt pins colcon-common-extensions)')
+    return candidate
+
+
+def repo_state() -> set[str]:
+    """Return the names at the top of the repository (to check the build leaves none)."""
+    return {entry.name for entry in REPO.iterdir()}
+
+
+@pytest.fixture(scope='module')
+def install(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Run ``colcon build`` of the repository into a temporary directory; return install/."""
+    tmp = tmp_path_factory.mktemp('colcon')
+    before = repo_state()
+    env = dict(os.environ, COLCON_HOME=str(tmp / 'colcon_home'))
+    build = subprocess.run(
+        [str(find_colcon()), '--log-base', str(tmp / 'log'), 'build',
+         '--base-paths', str(REPO), '--build-base', str(tmp / 'build'),
+         '--install-base', str(tmp / 'install'), '--event-handlers', 'console_direct-'],
+        cwd=tmp, env=env, capture_output=True, text=True, timeout=300)
+    assert build.returncode == 0, build.stdout[-4000:] + build.stderr[-4000:]
+    created = repo_state() - before
+    assert not created & {'build', 'install', 'log'}, f'colcon wrote into the repo: {created}'
+    return tmp / 'install'
+
+
+def site_packages(install: Path) -> Path:
+    """Return the install's site-packages (where colcon's setup would point PYTHONPATH)."""
+    version = sysconfig.get_python_version()
+    return install / PACKAGE / 'lib' / f'python{version}' / 'site-packages'
+
+
+def installed_env(install: Path, domain_id: int) -> dict[str, str]:
+    """Return the environment ``source install/setup.bash`` would give, repo not on the path."""
+    env = ros_env(domain_id, {'PYTHONPATH': str(site_packages(install)),
+                              'AMENT_PREFIX_PATH': str(install / PACKAGE)})
+    return env
+
+
+def test_build_installs_the_executable_and_the_config(install: Path) -> None:
+    executable = install / PACKAGE / 'lib' / PACKAGE / 'correct_node'
+    assert executable.is_file()
+    assert os.access(executable, os.X_OK)
+    share = install / PACKAGE / 'share' / PACKAGE
+    assert (share / 'package.xml').is_file()
+    for name in ('case2.yaml', 'fastdds_shm.xml'):
+        assert (share / 'config' / name).is_file(), name
+    assert (install / PACKAGE / 'share' / 'ament_index' / 'resource_index' / 'packages'
+            / PACKAGE).is_file()
+    assert (site_packages(install) / PACKAGE / 'correct_node.py').is_file()
+
+
+def test_installed_node_corrects_a_frame_and_exits_cleanly(
+        install: Path, tmp_path: Path) -> None:
+    executable = install / PACKAGE / 'lib' / PACKAGE / 'correct_node'
+    params = install / PACKAGE / 'share' / PACKAGE / 'config' / 'case2.yaml'
+    domain = next_domain_id()
+    env = installed_env(install, domain)
+    # The installed package, not the source tree, is what this environment imports.
+    where = subprocess.run([sys.executable, '-c', 'import mechdeconv_ros; '
+                            'print(mechdeconv_ros.__file__)'], env=env, cwd=tmp_path,
+                           capture_output=True, text=True, timeout=60)
+    assert where.returncode == 0, where.stderr
+    assert Path(where.stdout.strip()).is_relative_to(install), where.stdout
+    argv = node_command(params, 'sensor.width_px:=0', 'sensor.height_px:=0',
+                        executable=[str(executable)])
+    with NodeProcess(argv, env, tmp_path) as proc, RosClient(domain) as client:
+        received: dict[tuple[int, int], dict[str, object]] = {}
+        for kind, msg_type, topic in (('image', Image, 'image_rect'),
+                                      ('info', CameraInfo, 'camera_info')):
+            client.node.create_subscription(
+                msg_type, topic,
+                lambda m, kind=kind: received.setdefault(stamp_of(m), {}).update({kind: m}),
+                BEST_EFFORT)
+        pub = client.node.create_publisher(Image, 'image_raw', BEST_EFFORT)
+        assert client.spin_until(lambda: pub.get_subscription_count() > 0, 15.0), \
+            'the installed node did not subscribe:\n' + proc.output()[-3000:]
+        src = np.random.default_rng(0).integers(0, 255, (120, 160), dtype=np.uint8)
+        frame = make_image(src, 'mono8')
+        stamp = client.next_stamp(frame)
+        for _ in range(20):
+            pub.publish(frame)
+            if client.spin_until(lambda: len(received.get(stamp, {})) == 2, 0.5):
+                break
+        assert len(received.get(stamp, {})) == 2, 'no output:\n' + proc.output()[-3000:]
+        got, _ = image_to_array(received[stamp]['image'])       # type: ignore[arg-type]
+        assert got.shape == src.shape and not np.array_equal(got, src)
+        assert client.get_parameters('lens.r1_mm') == {'lens.r1_mm': 4.0}
+        assert client.set_parameters(Parameter('lens.stop_offset_mm', value=0.3))[0].successful
+        code = proc.stop(signal.SIGINT)
+        log = proc.output()
+    assert code == 0, log[-3000:]
+    assert 'Traceback' not in log, log[-3000:]
