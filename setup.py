@@ -7,7 +7,8 @@ package_name = 'mechdeconv_ros'
 setup(
     name=package_name,
     version='0.1.0',
-    packages=find_packages(exclude=['test']),
+    packages=find_packages(exclude=['test', 'test.*', 'benchmarks', 'benchmarks.*', 'tools',
+                                    'tools.*']),
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),

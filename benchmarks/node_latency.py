@@ -8,13 +8,14 @@ limited to localhost) and a private ``ROS_DOMAIN_ID``:
 
 * a **publisher** (``python -m benchmarks.node_latency --role publisher``): one prebuilt
   sensor_msgs/Image (rgb8), ``header.stamp`` set to the wall clock just before each publish,
-  at 30 Hz (paced) or as fast as it can (flat out);
+  paced at 30 Hz or 60 Hz, or as fast as it can (flat out);
 * the **node under test**: ``python -m mechdeconv_ros.correct_node --ros-args --params-file
   config/case2.yaml -p sensor.width_px:=0 -p sensor.height_px:=0`` (the sensor size from the
   frames), or the **pass-through** baseline :mod:`benchmarks.passthrough_node` (subscribe and
   republish, same QoS, same transport);
 * the **probe**, a subscriber in the benchmark process: ``image_rect`` as raw CDR (it only reads
-  the stamp, so it costs the pipeline as little as possible), ``camera_info``, and the node's
+  the stamp, so it costs the pipeline as little as possible), ``camera_info``,
+  ``/diagnostics`` (the node's own per-frame and rebuild times) and the node's
   ``set_parameters`` service.
 
 Latency = probe receive time - ``header.stamp`` (two hops: publisher -> node -> probe),
@@ -66,12 +67,16 @@ MALLOC_ENV = {'MALLOC_MMAP_THRESHOLD_': '67108864', 'MALLOC_TRIM_THRESHOLD_': '1
 SIZES = ((1280, 720), (1920, 1080))
 QUICK_SIZES = ((320, 240),)
 RATE_HZ = 30.0
+#: A camera rate above what a Python relay sustains at 1080p, paced (not flooding).
+HIGH_RATE_HZ = 60.0
 WARMUP_S = 1.0
 WINDOW_PACED_S = 4.0
-WINDOW_FLAT_S = 3.0
+WINDOW_SHORT_S = 3.0
 SET_REPEATS = 8
 SET_VALUES = (0.5, 0.2)
 STOP_OFFSET = 'lens.stop_offset_mm'
+#: What the probe reads from correct_node's /diagnostics.
+DIAGNOSTIC_KEYS = ('frame_time_ms_mean', 'frame_time_ms_max', 'last_rebuild_ms')
 #: Readiness and first-frame waits, s.
 READY_TIMEOUT_S = 20.0
 FIRST_FRAME_TIMEOUT_S = 6.0
@@ -200,16 +205,23 @@ def publisher_argv(width: int, height: int, rate_hz: float) -> list[str]:
 
 def publisher_main(width: int, height: int, rate_hz: float) -> int:
     """Publish a prebuilt rgb8 Image on ``image_raw`` until SIGINT; print counts as JSON."""
+    import threading
+
     import numpy as np
     import rclpy
-    from rclpy.executors import ExternalShutdownException
     from rclpy.node import Node
+    from rclpy.signals import SignalHandlerOptions
     from sensor_msgs.msg import Image
 
     from benchmarks.passthrough_node import sensor_qos
     from mechdeconv_ros.image_msgs import new_output_image
 
-    rclpy.init()
+    # Our own SIGINT handler (rclpy's would shut the context down under a running publish()
+    # and raise KeyboardInterrupt at an arbitrary point): stop the loop, then clean up.
+    stop = threading.Event()
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = Node('bench_camera')
     pub = node.create_publisher(Image, 'image_raw', sensor_qos())
     out = new_output_image(width, height, 'rgb8')
@@ -222,24 +234,18 @@ def publisher_main(width: int, height: int, rate_hz: float) -> int:
     count = 0
     start = time.monotonic()
     next_t = start
-    try:
-        while rclpy.ok():
-            if period:
-                delay = next_t - time.monotonic()
-                if delay > 0:
-                    time.sleep(delay)
-                next_t += period
-                if time.monotonic() - next_t > period:       # fell behind: do not burst
-                    next_t = time.monotonic()
-            now = time.time_ns()
-            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(now, 1_000_000_000)
-            pub.publish(msg)
-            count += 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:          # noqa: B902 - publish() on a context shut down by SIGINT
-        if rclpy.ok():
-            raise
+    while not stop.is_set():
+        if period:
+            delay = next_t - time.monotonic()
+            if delay > 0 and stop.wait(delay):
+                break
+            next_t += period
+            if time.monotonic() - next_t > period:       # fell behind: do not burst
+                next_t = time.monotonic()
+        now = time.time_ns()
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(now, 1_000_000_000)
+        pub.publish(msg)
+        count += 1
     seconds = time.monotonic() - start
     print(json.dumps({'published': count, 'seconds': seconds}), flush=True)
     node.destroy_node()
@@ -256,6 +262,7 @@ class Probe:
 
     def __init__(self, domain_id: int) -> None:
         """Create the context, the node, the subscriptions and the service client."""
+        from diagnostic_msgs.msg import DiagnosticArray
         import rclpy
         from rclpy.context import Context
         from rclpy.executors import SingleThreadedExecutor
@@ -274,10 +281,13 @@ class Probe:
                          reliability=ReliabilityPolicy.BEST_EFFORT)
         self.node.create_subscription(Image, 'image_rect', self._on_image, qos, raw=True)
         self.node.create_subscription(CameraInfo, 'camera_info', self._on_info, qos)
+        self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics,
+                                      10)
         self.set_client = self.node.create_client(SetParameters,
                                                   '/correct_node/set_parameters')
         self.frames: list[tuple[int, int]] = []        # (receive ns, stamp ns)
         self.infos: list[tuple[float, tuple[float, ...]]] = []    # (monotonic, D)
+        self.diagnostics: list[tuple[float, dict[str, float]]] = []    # (monotonic, values)
         self.recording = False
 
     def _on_image(self, data: bytes) -> None:
@@ -292,6 +302,23 @@ class Probe:
         self.infos.append((time.monotonic(), tuple(float(v) for v in msg.d)))
         if len(self.infos) > 4096:
             del self.infos[:2048]
+
+    def _on_diagnostics(self, msg: Any) -> None:
+        for status in msg.status:
+            values = {}
+            for kv in status.values:
+                if kv.key in DIAGNOSTIC_KEYS:
+                    try:
+                        values[kv.key] = float(kv.value)
+                    except ValueError:
+                        pass
+            if values:
+                self.diagnostics.append((time.monotonic(), values))
+
+    def diagnostics_since(self, start: float, key: str) -> list[float]:
+        """Return the node's reported ``key`` values received since ``start``."""
+        return [v[key] for t, v in self.diagnostics
+                if t >= start and key in v and math.isfinite(v[key])]
 
     def spin_for(self, seconds: float) -> None:
         """Spin the probe for a while."""
@@ -343,7 +370,6 @@ class Probe:
             parameters=[Parameter(STOP_OFFSET, value=float(value)).to_parameter_msg()])
         if not self.set_client.wait_for_service(timeout_sec=timeout):
             return {'value': value, 'error': 'set_parameters service not available'}
-        mark = len(self.infos)
         sent = time.monotonic()
         future = self.set_client.call_async(request)
         if not self.spin_until(future.done, timeout):
@@ -354,14 +380,14 @@ class Probe:
             return {'value': value, 'error': f'rejected: {result.reason}'}
 
         def new_info() -> tuple[float, tuple[float, ...]] | None:
-            return next((i for i in self.infos[mark:] if i[1] != old_d), None)
+            return next((i for i in self.infos if i[0] >= sent and i[1] != old_d), None)
 
         if not self.spin_until(lambda: new_info() is not None, timeout):
-            return {'value': value, 'error': 'no frame of the new model', 'reply_ms':
-                    (replied - sent) * 1e3}
+            return {'value': value, 'error': 'no frame of the new model',
+                    'reply_ms': (replied - sent) * 1e3}
         first = new_info()
         assert first is not None
-        between = sum(1 for t, d in self.infos[mark:] if t >= replied and d == old_d)
+        between = sum(1 for t, d in self.infos if t >= replied and d == old_d)
         return {'value': value, 'reply_ms': (replied - sent) * 1e3,
                 'reply_to_first_new_frame_ms': (first[0] - replied) * 1e3,
                 'send_to_first_new_frame_ms': (first[0] - sent) * 1e3,
@@ -435,14 +461,19 @@ def _run_window(probe: Probe, kind_proc: Proc, pub: Proc, seconds: float) -> dic
     })
     if stats['fps'] > 0:
         stats['node_cpu_ms_per_frame'] = stats['node_cores'] * 1000.0 / stats['fps']
+    callback = probe.diagnostics_since(wall0 + 0.5, 'frame_time_ms_mean')
+    if callback:
+        # correct_node's own time per frame (receive conversion to the last publish), as the
+        # 1 s means of its /diagnostics.
+        stats['node_callback_ms'] = statistics.median(callback)
     return stats
 
 
 def child_main(transport: str, quick: bool, out_json: Path) -> int:
     """Measure one transport (this process's Fast DDS profile is fixed by its environment)."""
     sizes = QUICK_SIZES if quick else SIZES
-    paced_s, flat_s = (1.0, 1.0) if quick else (WINDOW_PACED_S, WINDOW_FLAT_S)
-    rates = (RATE_HZ,) if transport == 'default' else (RATE_HZ, 0.0)
+    paced_s, short_s = (1.0, 1.0) if quick else (WINDOW_PACED_S, WINDOW_SHORT_S)
+    rates = (RATE_HZ,) if transport == 'default' else (RATE_HZ, HIGH_RATE_HZ, 0.0)
     if quick:
         rates = (RATE_HZ,)
     repeats = 2 if quick else SET_REPEATS
@@ -452,7 +483,7 @@ def child_main(transport: str, quick: bool, out_json: Path) -> int:
                            'fastdds_profile': env.get('FASTRTPS_DEFAULT_PROFILES_FILE'),
                            'malloc_env': {k: env.get(k) for k in MALLOC_ENV},
                            'bare_remap': {}, 'runs': [], 'set_parameters': [],
-                           'exit_codes': [], 'errors': []}
+                           'node_rebuild_ms': {}, 'exit_codes': [], 'errors': []}
     for width, height in sizes:
         doc['bare_remap'][f'{width}x{height}'] = bare_remap_ms(
             width, height, 5 if quick else 40)
@@ -477,8 +508,7 @@ def child_main(transport: str, quick: bool, out_json: Path) -> int:
                 name = f'{kind}_{size}'
                 kind_proc = Proc(node_argv(kind), env, log_dir, name)
                 running.append(kind_proc)
-                ready = probe.ready(READY_TIMEOUT_S)
-                if not ready:
+                if not probe.ready(READY_TIMEOUT_S):
                     doc['errors'].append(f'{name}: not ready after {READY_TIMEOUT_S} s: '
                                          f'{kind_proc.stderr_tail()}')
                 for rate in rates:
@@ -487,7 +517,7 @@ def child_main(transport: str, quick: bool, out_json: Path) -> int:
                                f'publisher_{name}_{label.replace(" ", "_")}')
                     running.append(pub)
                     stats = _run_window(probe, kind_proc, pub,
-                                        flat_s if rate == 0 else paced_s)
+                                        paced_s if rate == RATE_HZ else short_s)
                     stop(pub)
                     try:
                         published = json.loads(pub.stdout().strip().splitlines()[-1])
@@ -502,19 +532,24 @@ def child_main(transport: str, quick: bool, out_json: Path) -> int:
                         f"{stats['fps']:.1f} fps (published "
                         f"{stats.get('published_fps', math.nan):.1f}), p50 "
                         f"{stats.get('p50_ms', math.nan):.1f} ms, p99 "
-                        f"{stats.get('p99_ms', math.nan):.1f} ms, node "
-                        f"{stats['node_cores']:.2f} cores")
+                        f"{stats.get('p99_ms', math.nan):.1f} ms, relay "
+                        f"{stats['node_cores']:.2f} cores, callback "
+                        f"{stats.get('node_callback_ms', math.nan):.1f} ms")
                 if kind == 'node' and transport == 'shm':
                     pub = Proc(publisher_argv(width, height, RATE_HZ), env, log_dir,
                                f'publisher_{name}_set_parameters')
                     running.append(pub)
                     probe.first_frame(FIRST_FRAME_TIMEOUT_S)
                     probe.spin_for(WARMUP_S)
+                    set_start = time.monotonic()
                     for i in range(repeats):
                         result = probe.set_stop_offset(SET_VALUES[i % len(SET_VALUES)])
                         result['size'] = size
                         doc['set_parameters'].append(result)
                         probe.spin_for(0.3)
+                    probe.spin_for(1.2)
+                    doc['node_rebuild_ms'][size] = probe.diagnostics_since(
+                        set_start + 0.5, 'last_rebuild_ms')
                     stop(pub)
                     done = [r['reply_to_first_new_frame_ms'] for r in doc['set_parameters']
                             if r['size'] == size and 'reply_to_first_new_frame_ms' in r]
@@ -543,7 +578,7 @@ def _find(runs: Sequence[Mapping[str, Any]], **match: Any) -> Mapping[str, Any] 
 
 
 def evaluate(children: Mapping[str, Mapping[str, Any]]) -> dict[str, Any]:
-    """Return the targets per size (shm transport) and what the profile buys."""
+    """Return the targets per size (shm transport)."""
     out: dict[str, Any] = {}
     shm = children.get('shm')
     if not shm:
@@ -559,8 +594,8 @@ def evaluate(children: Mapping[str, Mapping[str, Any]]) -> dict[str, Any]:
             limit = min(pass_flat['fps'], 1000.0 / remap['median_ms'])
             # A relay that receives, remaps and publishes one frame at a time (no overlap of
             # the remap with the transport) cannot beat 1 / (pass-through time + remap time).
-            serial = 1000.0 / (1000.0 / pass_flat['fps'] + remap['median_ms']) \
-                if pass_flat['fps'] > 0 else math.nan
+            serial = (1000.0 / (1000.0 / pass_flat['fps'] + remap['median_ms'])
+                      if pass_flat['fps'] > 0 else math.nan)
             entry.update({'node_fps': node_flat['fps'], 'passthrough_fps': pass_flat['fps'],
                           'remap_fps': 1000.0 / remap['median_ms'],
                           'serial_bound_fps': serial,
@@ -588,6 +623,9 @@ def evaluate(children: Mapping[str, Mapping[str, Any]]) -> dict[str, Any]:
                           'set_met_median': bool(sets) and not failures
                           and statistics.median(sets) <= target,
                           'set_met_all': bool(sets) and not failures and max(sets) <= target})
+            rebuilds = shm.get('node_rebuild_ms', {}).get(size) or []
+            if rebuilds:
+                entry['node_rebuild_ms_median'] = statistics.median(rebuilds)
         out[size] = entry
     return out
 
@@ -630,8 +668,8 @@ def run(out_dir: Path = RESULTS, quick: bool = False, plots: bool = True,
         'machine': machine_info(),
         'method': __doc__,
         'rate_hz': RATE_HZ,
-        'windows_s': {'paced': 1.0 if quick else WINDOW_PACED_S,
-                      'flat_out': 1.0 if quick else WINDOW_FLAT_S, 'warmup': WARMUP_S},
+        'windows_s': {'paced_30hz': 1.0 if quick else WINDOW_PACED_S,
+                      'other': 1.0 if quick else WINDOW_SHORT_S, 'warmup': WARMUP_S},
         'children': children,
         'targets': evaluate(children),
         'errors': errors,
@@ -677,20 +715,14 @@ def write_plot(doc: Mapping[str, Any], out_dir: Path) -> str:
             ax.bar(pos, np.nan_to_num(vals), 0.2, color=color, label=label)
             if metric == 'p50_ms':
                 ax.plot(pos, p99, '_', color='k', ms=12)
-        if metric == 'fps':
-            for j, size in enumerate(sizes):
-                target = doc['targets'].get(size, {}).get('throughput_target_fps')
-                if target:
-                    ax.plot([j - 0.4, j + 0.4], [target, target], 'r--', lw=1)
-        else:
-            for j, size in enumerate(sizes):
-                target = doc['targets'].get(size, {}).get('latency_target_ms')
-                if target:
-                    ax.plot([j - 0.4, j + 0.4], [target, target], 'r--', lw=1)
+        key = 'throughput_target_fps' if metric == 'fps' else 'latency_target_ms'
+        for j, size in enumerate(sizes):
+            target = doc['targets'].get(size, {}).get(key)
+            if target:
+                ax.plot([j - 0.4, j + 0.4], [target, target], 'r--', lw=1)
         ax.set_xticks(x, sizes)
-        ax.set_title(title + ' (red: target)')
+        ax.set_title(title + ' (red: target)', fontsize=10)
         ax.grid(axis='y', alpha=0.3)
-    for ax in axes[:2]:
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=8)
     ax = axes[2]
@@ -703,7 +735,7 @@ def write_plot(doc: Mapping[str, Any], out_dir: Path) -> str:
                label='target: 2 frame periods at 30 fps')
     ax.set_xticks(range(len(sizes)), sizes)
     ax.set_xlim(-0.5, len(sizes) - 0.5)
-    ax.set_title('set_parameters reply -> first frame of the new model [ms]')
+    ax.set_title('set_parameters reply -> first frame of the new model [ms]', fontsize=10)
     ax.grid(axis='y', alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
@@ -737,17 +769,20 @@ def tables(doc: Mapping[str, Any]) -> list[str]:
              f'by the publisher (two hops), at {RATE_HZ:g} Hz; throughput with the publisher '
              'flat out. Pass-through = subscribe + republish (same QoS, same transport). '
              'shm = config/fastdds_shm.xml in every process; default = Fast DDS builtin '
-             'transports. All with the Makefile MALLOC_* settings.', '']
+             'transports. All with the Makefile MALLOC_* settings. Relay CPU ms/frame = the '
+             "relay process's CPU time per delivered frame; node callback = correct_node's "
+             'own per-frame time from its /diagnostics.', '']
     rows = []
     for transport, child in doc['children'].items():
         for run in child['runs']:
             rows.append([run['size'], transport, run['kind'], run['rate'],
                          _f(run.get('published_fps')), _f(run['fps']), _f(run.get('p50_ms')),
                          _f(run.get('p99_ms')), _f(run['node_cores'], 2),
-                         _f(run.get('node_cpu_ms_per_frame')), _f(run['others_cores'], 2)])
+                         _f(run.get('node_cpu_ms_per_frame')),
+                         _f(run.get('node_callback_ms')), _f(run['others_cores'], 2)])
     lines += markdown_table(['frame', 'transport', 'relay', 'publisher', 'published fps',
                              'delivered fps', 'latency p50 ms', 'p99 ms', 'relay cores',
-                             'relay CPU ms/frame', 'others cores'], rows)
+                             'relay CPU ms/frame', 'node callback ms', 'others cores'], rows)
     lines += ['', 'Targets (shm profile, same run):', '']
     rows = []
     for size, t in doc['targets'].items():
@@ -760,16 +795,16 @@ def tables(doc: Mapping[str, Any]) -> list[str]:
             f"{_f(t.get('node_p50_ms'))} vs <= {_f(t.get('latency_target_ms'))}: "
             f"{'met' if t.get('latency_met') else 'MISSED'}"
             if 'node_p50_ms' in t else '-',
-            _set_cell(t)])
-    notes = ['', 'Serial bound = 1 / (1 / pass-through fps + bare remap time): the most a '
-             "relay can forward when it does the pass-through's work and then the remap, one "
-             'frame at a time; with the publisher flat out on one of the two cores there is '
-             'no spare core to overlap them.']
+            _set_cell(t), _f(t.get('node_rebuild_ms_median'))])
     lines += markdown_table(['frame', 'bare remap ms (1 thread, median)',
                              'node fps (flat out) vs 0.8 x min(pass-through, 1/remap)',
                              'node p50 ms vs pass-through p50 + 1.5 x remap',
-                             'param set -> first new frame ms (median / max)'], rows)
-    lines += notes
+                             'param set -> first new frame ms (median / max)',
+                             'node rebuild ms (its diagnostics)'], rows)
+    lines += ['', 'Serial bound = 1 / (1 / pass-through fps + bare remap time): the most a '
+              "relay can forward when it does the pass-through's work and then the remap, one "
+              'frame at a time; with the publisher flat out on one of the two cores there is '
+              'no spare core to overlap them.']
     if doc['errors']:
         lines += ['', 'Errors: ' + '; '.join(e.splitlines()[0] for e in doc['errors'])]
     figs = doc.get('figures') or {}

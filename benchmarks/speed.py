@@ -39,8 +39,8 @@ import time
 from typing import Any, Mapping
 
 from benchmarks.common import (
-    fmt_ms, fmt_ratio, interleave, log, machine_info, machine_line, markdown_table, RAW,
-    RESULTS, Variant, write_json)
+    fmt_ms, fmt_ratio, interleave, log, machine_info, machine_line, markdown_table, RESULTS,
+    Variant, write_json)
 import cv2
 from mechdeconv_ros.model import build_model, LensModel
 from mechdeconv_ros.params import load_params_file
@@ -345,8 +345,7 @@ def run(out_dir: Path = RESULTS, quick: bool = False, plots: bool = True) -> dic
     if plots:
         doc['figures'] = write_plots(doc, out_dir)
     write_json(out_dir / 'speed.json', doc)
-    write_json((out_dir / 'raw' if out_dir != RESULTS else RAW) / 'speed_samples.json',
-               raw_samples)
+    write_json(out_dir / 'raw' / 'speed_samples.json', raw_samples)
     return doc
 
 
@@ -359,6 +358,7 @@ def write_plots(doc: Mapping[str, Any], out_dir: Path) -> dict[str, str]:
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     out = {}
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.8), sharey=True)
@@ -413,6 +413,7 @@ def write_plots(doc: Mapping[str, Any], out_dir: Path) -> dict[str, str]:
     if '1920x1080' in doc['rebuild']:
         ax.plot([1920 * 1080 / 1e6], [REBUILD_TARGET_MS], 'r*', ms=12,
                 label=f'target at 1080p: {REBUILD_TARGET_MS:g} ms')
+    ax.xaxis.set_minor_locator(matplotlib.ticker.NullLocator())
     ax.set_xticks(pixels, sizes)
     ax.set_xlabel('frame')
     ax.set_ylabel('ms (median)')

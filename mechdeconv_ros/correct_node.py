@@ -3,13 +3,15 @@
 """
 correct_node: live lens-distortion correction from the lens's physical description.
 
-Topics (all relative, so namespaces and remaps apply):
+Topics (relative names, so namespaces and remaps apply; ``/diagnostics`` is absolute):
 
 * subscribes ``image_raw`` (sensor_msgs/Image) -- only while an output has a subscriber,
   unless ``lazy_subscription`` is false;
 * publishes ``image_rect`` (same encoding, the input header), ``camera_info`` (the raw camera:
   K and the equivalent D of the traced lens, R = I, P = [K_new | 0]) and ``camera_info_rect``
-  (the corrected image: K = K_new, D = 0, R = I, the same P), each with the input header;
+  (the corrected image: K = K_new, D = 0, R = I, the same P), each with the input header.
+  A big-endian 16-bit or float input is published in the host's byte order (``is_bigendian``
+  says which), with the same values;
 * publishes ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) at 1 Hz: the lens summary and
   the frame counters.
 
@@ -157,7 +159,6 @@ class ActiveModel:
     values_generation: int
     info_raw: CameraInfo
     info_rect: CameraInfo
-    report: dict[str, Any]
     build_ms: float
 
 
@@ -218,6 +219,8 @@ class CorrectNode(Node):
         self._rebuild_error = ''
         self._last_rebuild_ms = math.nan
         self._validated: tuple[tuple[Any, ...], LensModel] | None = None
+        self._report_cache: tuple[int, dict[str, Any]] | None = None
+        self._failed_build: tuple[int, int, int] | None = None
         self._stats = FrameStats()
         self._pool = OutputImagePool()
         self._subscription: Subscription | None = None
@@ -403,7 +406,7 @@ class CorrectNode(Node):
                            values_generation=generation,
                            info_raw=camera_info_from_model(model, rectified=False),
                            info_rect=camera_info_from_model(model, rectified=True),
-                           report=model.report(), build_ms=total_ms)
+                           build_ms=total_ms)
 
     def _install_locked(self, candidate: ActiveModel) -> ActiveModel:
         """
@@ -426,7 +429,7 @@ class CorrectNode(Node):
         installed = ActiveModel(
             model=candidate.model, rectifier=candidate.rectifier, revision=self._revision,
             values_generation=candidate.values_generation, info_raw=candidate.info_raw,
-            info_rect=candidate.info_rect, report=candidate.report, build_ms=candidate.build_ms)
+            info_rect=candidate.info_rect, build_ms=candidate.build_ms)
         self._active = installed                # the one atomic swap frames see
         self._last_rebuild_ms = candidate.build_ms
         self._rebuild_error = ''
@@ -476,7 +479,11 @@ class CorrectNode(Node):
                     if generation >= self._values_generation:
                         self._rebuild_pending = True
                     continue
-                self._install_locked(candidate)
+                installed = self._install_locked(candidate)
+            try:
+                self._report_of(installed)      # off the critical path, for diagnostics
+            except Exception as err:    # noqa: B902 - a summary must not stop the rebuilds
+                self.get_logger().warning(f'model summary failed: {err!r}')
 
     def _model_for_frame(self, width: int, height: int) -> ActiveModel | None:
         """
@@ -503,9 +510,13 @@ class CorrectNode(Node):
             return None
         with self._lock:
             self._input_size = (width, height)
+        if self._failed_build == (generation, width, height):
+            self._stats.frames_dropped += 1     # known to fail: do not rebuild every frame
+            return None
         try:
             candidate = self._build(values, generation, (width, height))
         except Exception as err:        # noqa: B902 - drop the frame, never the node
+            self._failed_build = (generation, width, height)
             self._stats.frames_dropped += 1
             self._stats.last_error = f'no model for {width}x{height} px: {err}'
             self.get_logger().error(f'dropping frames: {self._stats.last_error}',
@@ -602,6 +613,21 @@ class CorrectNode(Node):
             self.get_logger().error(f'diagnostics failed: {err!r}',
                                     throttle_duration_sec=LOG_THROTTLE_S)
 
+    def _report_of(self, active: ActiveModel) -> dict[str, Any]:
+        """
+        Return the model summary of an active model, computed once per revision.
+
+        The summary (tolerance propagation, depth of field, ...) costs a few ms, so it stays
+        off the path from a parameter set to the first corrected frame: the rebuild thread
+        computes it after the swap, or the diagnostics timer on first use.
+        """
+        cached = self._report_cache
+        if cached is not None and cached[0] == active.revision:
+            return cached[1]
+        report = active.model.report()
+        self._report_cache = (active.revision, report)
+        return report
+
     def diagnostics(self) -> DiagnosticArray:
         """
         Return the current diagnostics: one status with the lens summary and the counters.
@@ -641,9 +667,10 @@ class CorrectNode(Node):
         warnings: list[str] = []
         if active is not None:
             entries['model_values_generation'] = active.values_generation
-            for key, value in _flatten_report(active.report):
+            report = self._report_of(active)
+            for key, value in _flatten_report(report):
                 entries[key] = value
-            warnings = list(active.report.get('warnings', []))
+            warnings = list(report.get('warnings', []))
         if rebuild_error:
             status.level = DiagnosticStatus.ERROR
             status.message = f'rebuild failed, previous model in use: {rebuild_error}'

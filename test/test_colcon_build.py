@@ -29,6 +29,8 @@ from ros_helpers import (
     RosClient, stamp_of)
 from sensor_msgs.msg import CameraInfo, Image
 
+pytestmark = pytest.mark.ros
+
 PACKAGE = 'mechdeconv_ros'
 
 

@@ -395,11 +395,13 @@ def test_parameter_sets_rebuild_the_model(harness: Harness, outputs: Outputs) ->
         harness.values.update(original)
     model = expected_model(harness.values, width, height)
     assert_camera_infos(_exchange_until_model(harness, outputs, msg, model), model)
-    # Setting a parameter to the value it has rebuilds nothing.
+    # Setting a parameter to the value it has, or a node parameter, rebuilds nothing.
     revision = harness.revision()
-    same = harness.client.set_parameters(
-        double('lens.stop_offset_mm', harness.values['lens.stop_offset_mm']))
-    assert same[0].successful, same[0].reason
+    results = harness.client.set_parameters(
+        double('lens.stop_offset_mm', harness.values['lens.stop_offset_mm']),
+        Parameter('remap_threads', Parameter.Type.INTEGER, 2),
+        Parameter('remap_threads', Parameter.Type.INTEGER, 1))
+    assert all(r.successful for r in results), [r.reason for r in results]
     harness.exchange(outputs, msg)
     assert harness.revision() == revision
 
