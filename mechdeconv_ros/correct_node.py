@@ -252,6 +252,7 @@ class CorrectNode(Node):
                 self._install_locked(
                     self._make_active(startup_model, self._values_generation, 0.0))
 
+        self._rebuild_trigger = self.create_guard_condition(self._request_rebuild)
         self._worker = threading.Thread(target=self._rebuild_loop, name='mechdeconv-rebuild',
                                         daemon=True)
         self._worker.start()
@@ -369,12 +370,22 @@ class CorrectNode(Node):
             self._values = values
             if model_changed:               # setting a parameter to its value rebuilds nothing
                 self._values_generation += 1
-                self._rebuild_pending = True
-                self._lock.notify_all()
+        if model_changed:
+            # Rebuild once the executor is done with this request: rclpy's parameter service
+            # applies a multi-parameter set_parameters (what `ros2 param load` sends) one
+            # parameter at a time inside one callback, and that must give one rebuild, not
+            # one per parameter. The guard condition's callback runs after it returns.
+            self._rebuild_trigger.trigger()
         if 'remap_threads' in changed:
             self._apply_threads(values)
         if 'lazy_subscription' in changed:
             self._update_subscription()
+
+    def _request_rebuild(self) -> None:
+        """Wake the rebuild thread for the newest accepted values (guard-condition callback)."""
+        with self._lock:
+            self._rebuild_pending = True
+            self._lock.notify_all()
 
     def _validation_size(self, values: Mapping[str, Any]) -> tuple[int, int]:
         """Return the image size to build a candidate model for (``build_model``'s inputs)."""

@@ -388,6 +388,18 @@ def test_parameter_sets_rebuild_the_model(harness: Harness, outputs: Outputs) ->
         harness.client.spin_for(0.5)
         assert harness.revision() == revision + 1
         revision += 1
+
+        # `ros2 param load` sends ONE set_parameters request with several parameters, which
+        # rclpy applies one at a time: still one rebuild.
+        results = harness.client.set_parameters(
+            double('lens.stop_offset_mm', 0.3), double('lens.thickness_mm', 3.2))
+        assert [r.successful for r in results] == [True, True], [r.reason for r in results]
+        harness.values.update({'lens.stop_offset_mm': 0.3, 'lens.thickness_mm': 3.2})
+        model = expected_model(harness.values, width, height)
+        assert_camera_infos(_exchange_until_model(harness, outputs, msg, model), model)
+        harness.client.spin_for(0.5)
+        assert harness.revision() == revision + 1
+        revision += 1
     finally:
         restore = harness.client.set_parameters_atomically(
             *(double(k, v) for k, v in original.items()))
