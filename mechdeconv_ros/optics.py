@@ -36,17 +36,8 @@ from __future__ import annotations
 import math
 from typing import Callable, Mapping
 
+from mechdeconv_ros.raytrace import finite_number as _number
 from mechdeconv_ros.raytrace import AFOCAL_POWER_PER_MM, Prescription, Surface
-
-
-def _number(what: str, value: float) -> float:
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f'{what} must be a number, got {value!r}') from None
-    if not math.isfinite(number):
-        raise ValueError(f'{what} must be finite, got {number}')
-    return number
 
 
 def _lens(n: float, r1_mm: float, r2_mm: float,

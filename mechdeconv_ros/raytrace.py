@@ -97,7 +97,7 @@ BACKWARD_TOLERANCE_MM = 1e-9
 _ERRSTATE = {'invalid': 'ignore', 'divide': 'ignore', 'over': 'ignore'}
 
 
-def _finite(what: str, value: object) -> float:
+def finite_number(what: str, value: object) -> float:
     try:
         number = float(value)
     except (TypeError, ValueError):
@@ -161,21 +161,21 @@ class Prescription:
         for i, surface in enumerate(surfaces):
             if not isinstance(surface, Surface):
                 raise ValueError(f'surface {i}: expected a Surface, got {surface!r}')
-            _finite(f'surface {i}: radius', surface.radius_mm)
-            thickness = _finite(f'surface {i}: thickness', surface.thickness_mm)
+            finite_number(f'surface {i}: radius', surface.radius_mm)
+            thickness = finite_number(f'surface {i}: thickness', surface.thickness_mm)
             if i < last and thickness < 0:
                 raise ValueError(f'surface {i}: thickness {thickness:g} mm < 0')
-            index = _finite(f'surface {i}: refractive index', surface.refractive_index)
+            index = finite_number(f'surface {i}: refractive index', surface.refractive_index)
             if index < 1:
                 raise ValueError(f'surface {i}: refractive index {index:g} < 1')
-            semi = _finite(f'surface {i}: semi-diameter', surface.semi_diameter_mm)
+            semi = finite_number(f'surface {i}: semi-diameter', surface.semi_diameter_mm)
             if semi < 0:
                 raise ValueError(f'surface {i}: semi-diameter {semi:g} mm < 0')
-        _finite('stop position', self.stop_z_mm)
-        index = _finite('object-space refractive index', self.object_index)
+        finite_number('stop position', self.stop_z_mm)
+        index = finite_number('object-space refractive index', self.object_index)
         if index < 1:
             raise ValueError(f'object-space refractive index {index:g} < 1')
-        semi = _finite('stop semi-diameter', self.stop_semi_diameter_mm)
+        semi = finite_number('stop semi-diameter', self.stop_semi_diameter_mm)
         if semi < 0:
             raise ValueError(f'stop semi-diameter {semi:g} mm < 0')
 
