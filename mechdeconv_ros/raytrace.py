@@ -98,6 +98,7 @@ _ERRSTATE = {'invalid': 'ignore', 'divide': 'ignore', 'over': 'ignore'}
 
 
 def finite_number(what: str, value: object) -> float:
+    """Return ``value`` as a finite float, or raise ValueError naming ``what``."""
     try:
         number = float(value)
     except (TypeError, ValueError):
