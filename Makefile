@@ -32,6 +32,7 @@ demo: $(STAMP)
 	$(PY) -m mechdeconv_ros.demo
 
 bench: $(STAMP)
+	$(PY) -m pip install --disable-pip-version-check -q -r requirements-bench.txt
 	$(PY) -m benchmarks.run_all
 
 reference: $(STAMP)

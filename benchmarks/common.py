@@ -4,9 +4,12 @@
 Shared helpers of the benchmarks: machine facts, load monitoring, interleaved timing, output.
 
 Timing method (shared/reference/perf-anchors.md): the variants of one comparison run in
-*rounds*; in every round each variant runs once to warm up and then ``reps`` timed calls, and
-the order of the variants rotates from round to round, so a burst of load from another process
-hits all of them alike. Before each round the machine is given up to ``quiet_wait_s`` to become
+*rounds*. Variants are grouped by their OpenCV thread count and an optional group name; in
+every round each group runs in turn (``cv2.setNumThreads`` once per group), each of its
+variants is called once to warm up, and then the group's variants are called in turn, one call
+each, ``reps`` times over, so a burst of load from another process hits all of them alike
+(call-level interleaving). The order of the groups and of the variants in a group rotates
+from round to round. Before each round the machine is given up to ``quiet_wait_s`` to become
 quiet, and how many cores *other* processes used during the round is recorded
 (``others_cores``: busy time of the whole machine from ``/proc/stat`` minus this process's own
 CPU time, over the wall time). A variant is summarised by its ``min`` over every call and the
@@ -194,6 +197,8 @@ class Variant:
     call: Callable[[], Any]
     threads: int = 0
     info: dict[str, Any] = field(default_factory=dict)
+    #: Variants of one group (and thread count) are interleaved call by call.
+    group: str = ''
 
 
 @dataclass
@@ -244,7 +249,7 @@ def interleave(variants: Sequence[Variant], rounds: int, reps: int | Mapping[str
 
     :param variants: what to time; a variant with ``threads > 0`` runs after
         ``cv2.setNumThreads(threads)``.
-    :param rounds: rounds; the variant order rotates by one each round.
+    :param rounds: rounds; the order of groups and variants rotates by one each round.
     :param reps: timed calls per variant and round (or per variant name).
     :param quiet_wait_s: the longest wait for a quiet machine before each round.
     :return: timings by name, and the others' cores of each round.
@@ -252,18 +257,34 @@ def interleave(variants: Sequence[Variant], rounds: int, reps: int | Mapping[str
     import cv2
     previous_threads = cv2.getNumThreads()
     timings = {v.name: Timing(v.name, info=dict(v.info, threads=v.threads)) for v in variants}
+    groups: dict[tuple[int, str], list[Variant]] = {}
+    for v in variants:
+        groups.setdefault((v.threads, v.group), []).append(v)
+    keys = list(groups)
     others = []
+    clock = time.perf_counter_ns
     try:
         for r in range(rounds):
             wait_for_quiet(quiet_wait_s)
             monitor = LoadMonitor()
-            shift = r % len(variants)
-            for v in list(variants[shift:]) + list(variants[:shift]):
-                if v.threads:
-                    cv2.setNumThreads(v.threads)
-                v.call()                                          # warm-up
-                n = reps[v.name] if isinstance(reps, Mapping) else reps
-                timings[v.name].samples.append(time_ms(v.call, n))
+            for key in keys[r % len(keys):] + keys[:r % len(keys)]:
+                group = groups[key]
+                order = group[r % len(group):] + group[:r % len(group)]
+                if key[0]:
+                    cv2.setNumThreads(key[0])
+                for v in order:
+                    v.call()                                      # warm-up
+                counts = {v.name: reps[v.name] if isinstance(reps, Mapping) else reps
+                          for v in order}
+                samples: dict[str, list[float]] = {v.name: [] for v in order}
+                for i in range(max(counts.values())):
+                    for v in order:
+                        if i < counts[v.name]:
+                            start = clock()
+                            v.call()
+                            samples[v.name].append((clock() - start) * 1e-6)
+                for name, values in samples.items():
+                    timings[name].samples.append(values)
             others.append(monitor.others_cores())
     finally:
         cv2.setNumThreads(previous_threads)

@@ -36,6 +36,10 @@ first new frame <= 2 frame periods at 30 fps. The bare remap time is ``Rectifier
 the node's default ``remap_threads`` (1), median, measured in the child before the ROS
 processes start.
 
+The machine is shared: how many cores other processes kept busy is recorded per window, and a
+window during which they kept more than 0.3 cores busy is measured once more (the stream keeps
+running); the less disturbed window is kept and the other recorded under ``discarded``.
+
 Every process is started in its own process group and stopped by SIGINT to the group; exit
 codes are recorded and a non-zero one is reported.
 """
@@ -47,6 +51,7 @@ import json
 import math
 import os
 from pathlib import Path
+import shutil
 import signal
 import statistics
 import struct
@@ -81,6 +86,9 @@ DIAGNOSTIC_KEYS = ('frame_time_ms_mean', 'frame_time_ms_max', 'last_rebuild_ms')
 READY_TIMEOUT_S = 20.0
 FIRST_FRAME_TIMEOUT_S = 6.0
 CHILD_TIMEOUT_S = 400.0
+#: A window during which other processes kept more cores than this busy is measured again.
+BUSY_OTHERS_CORES = 0.3
+MAX_RETRIES = 1
 THROUGHPUT_FACTOR = 0.8
 LATENCY_REMAP_FACTOR = 1.5
 SET_TARGET_PERIODS = 2
@@ -400,11 +408,21 @@ class Probe:
         self._rclpy.try_shutdown(context=self.context)
 
 
-def latency_stats(frames: Sequence[tuple[int, int]], seconds: float) -> dict[str, Any]:
-    """Return fps, and latency p50/p90/p99/max (ms) of received frames."""
+def latency_stats(frames: Sequence[tuple[int, int]], seconds: float,
+                  window_ns: tuple[int, int] | None = None) -> dict[str, Any]:
+    """
+    Return fps, latency p50/p90/p99/max (ms) of received frames, and the longest gap.
+
+    :param frames: ``(receive ns, stamp ns)`` pairs.
+    :param seconds: the window length.
+    :param window_ns: the window's start and end (wall clock, ns): the gaps before the first
+        and after the last frame count too (a stall at either end).
+    """
     out: dict[str, Any] = {'frames': len(frames), 'fps': len(frames) / seconds}
-    if len(frames) > 1:
-        arrivals = sorted(r for r, _ in frames)
+    arrivals = sorted(r for r, _ in frames)
+    if window_ns is not None:
+        arrivals = [window_ns[0]] + arrivals + [window_ns[1]]
+    if len(arrivals) > 1:
         out['longest_gap_ms'] = max(b - a for a, b in zip(arrivals, arrivals[1:])) * 1e-6
     if frames:
         lat = sorted((r - s) * 1e-6 for r, s in frames)
@@ -444,19 +462,17 @@ def bare_remap_ms(width: int, height: int, reps: int) -> dict[str, float]:
     return {'median_ms': statistics.median(samples), 'min_ms': min(samples), 'reps': reps}
 
 
-def _run_window(probe: Probe, kind_proc: Proc, pub: Proc, seconds: float) -> dict[str, Any]:
-    """Warm up, then measure one window with the CPU use of each process."""
-    got_first = probe.first_frame(FIRST_FRAME_TIMEOUT_S)
-    probe.spin_for(WARMUP_S)
+def _measure_once(probe: Probe, kind_proc: Proc, pub: Proc, seconds: float) -> dict[str, Any]:
+    """Measure one window: frames, latency, and the CPU use of each process."""
     cpu0 = {'node': kind_proc.cpu_s(), 'publisher': pub.cpu_s()}
     probe_cpu0 = time.process_time()
     monitor = LoadMonitor(lambda: time.process_time() + kind_proc.cpu_s() + pub.cpu_s())
     wall0 = time.monotonic()
+    start_ns = time.time_ns()
     frames = probe.measure(seconds)
     wall = time.monotonic() - wall0
-    stats = latency_stats(frames, seconds)
+    stats = latency_stats(frames, seconds, (start_ns, time.time_ns()))
     stats.update({
-        'first_frame_seen': got_first,
         'node_cores': (kind_proc.cpu_s() - cpu0['node']) / wall,
         'publisher_cores': (pub.cpu_s() - cpu0['publisher']) / wall,
         'probe_cores': (time.process_time() - probe_cpu0) / wall,
@@ -470,6 +486,28 @@ def _run_window(probe: Probe, kind_proc: Proc, pub: Proc, seconds: float) -> dic
         # 1 s means of its /diagnostics.
         stats['node_callback_ms'] = statistics.median(callback)
     return stats
+
+
+def _run_window(probe: Probe, kind_proc: Proc, pub: Proc, seconds: float,
+                retries: int = MAX_RETRIES) -> dict[str, Any]:
+    """
+    Warm up, then measure a window; measure again while other processes were busy.
+
+    When processes outside the measurement kept more than ``BUSY_OTHERS_CORES`` busy during
+    a window (this machine is shared), the window is measured again (up to ``retries`` more
+    times, the stream keeps running) and the least disturbed one is kept; the others are
+    recorded under ``discarded``.
+    """
+    got_first = probe.first_frame(FIRST_FRAME_TIMEOUT_S)
+    probe.spin_for(WARMUP_S)
+    attempts = [_measure_once(probe, kind_proc, pub, seconds)]
+    while attempts[-1]['others_cores'] > BUSY_OTHERS_CORES and len(attempts) <= retries:
+        attempts.append(_measure_once(probe, kind_proc, pub, seconds))
+    best = min(attempts, key=lambda a: a['others_cores'])
+    best['first_frame_seen'] = got_first
+    best['discarded'] = [{k: a.get(k) for k in ('fps', 'p50_ms', 'p99_ms', 'others_cores')}
+                         for a in attempts if a is not best]
+    return best
 
 
 def _set_parameters_test(probe: Probe, doc: dict[str, Any], size: str, repeats: int) -> None:
@@ -536,7 +574,8 @@ def child_main(transport: str, quick: bool, out_json: Path) -> int:
                                f'publisher_{name}_{label.replace(" ", "_")}')
                     running.append(pub)
                     stats = _run_window(probe, kind_proc, pub,
-                                        paced_s if rate == RATE_HZ else short_s)
+                                        paced_s if rate == RATE_HZ else short_s,
+                                        0 if quick else MAX_RETRIES)
                     if kind == 'node' and transport == 'shm' and rate == RATE_HZ:
                         # With the 30 Hz stream still running, before any flood (a flat-out
                         # publisher can leave the shared-memory transport hiccuping for a
@@ -668,6 +707,12 @@ def run(out_dir: Path = RESULTS, quick: bool = False, plots: bool = True,
             children[transport] = json.loads(out_json.read_text())
             errors += [f'[{transport}] {e}' for e in children[transport]['errors']]
         sys.stderr.write(child.err_path.read_text(errors='replace'))
+    if not errors:
+        # The process logs are kept only when something went wrong (their folders are named
+        # in the errors and in each child's ``log_dir``).
+        for child_doc in children.values():
+            shutil.rmtree(child_doc.get('log_dir', ''), ignore_errors=True)
+        shutil.rmtree(log_dir, ignore_errors=True)
     doc = {
         'benchmark': 'node_latency',
         'machine': machine_info(),
@@ -690,25 +735,20 @@ def run(out_dir: Path = RESULTS, quick: bool = False, plots: bool = True,
 # ---------------------------------------------------------------------------------------------
 
 def write_plot(doc: Mapping[str, Any], out_dir: Path) -> str:
-    """Write throughput, latency and parameter-set reaction in one figure."""
+    """Write throughput, latency, what the shm profile buys, and parameter-set reaction."""
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
     import numpy as np
 
-    fig, axes = plt.subplots(1, 3, figsize=(15, 4.6))
+    fig, axes = plt.subplots(2, 2, figsize=(13, 9))
     runs = [r for child in doc['children'].values() for r in child['runs']]
     sizes = sorted({r['size'] for r in runs}, key=lambda s: int(s.split('x')[0]))
     x = np.arange(len(sizes))
-    bars = (('passthrough', 'shm', 'pass-through, shm profile', 'tab:gray'),
-            ('node', 'shm', 'correct_node, shm profile', 'tab:blue'),
-            ('passthrough', 'default', 'pass-through, default transports', 'silver'),
-            ('node', 'default', 'correct_node, default transports', 'lightsteelblue'))
-    for ax, rate, metric, title in (
-            (axes[0], 'flat out', 'fps', 'throughput, publisher flat out [fps]'),
-            (axes[1], f'{RATE_HZ:g} Hz', 'p50_ms', f'latency at {RATE_HZ:g} Hz: p50 (bar), '
-                                                   'p99 (tick) [ms]')):
-        for i, (kind, transport, label, color) in enumerate(bars):
+
+    def bars(ax: Any, series: Sequence[tuple[str, str, str, str, str]], metric: str) -> None:
+        width = 0.8 / len(series)
+        for i, (kind, transport, rate, label, color) in enumerate(series):
             vals, p99 = [], []
             for size in sizes:
                 run = _find(runs, kind=kind, size=size, rate=rate, transport=transport)
@@ -716,21 +756,43 @@ def write_plot(doc: Mapping[str, Any], out_dir: Path) -> str:
                 p99.append(run.get('p99_ms', math.nan) if run else math.nan)
             if all(not math.isfinite(v) for v in vals):
                 continue
-            pos = x + (i - 1.5) * 0.2
-            ax.bar(pos, np.nan_to_num(vals), 0.2, color=color, label=label)
+            pos = x + (i - (len(series) - 1) / 2) * width
+            ax.bar(pos, np.nan_to_num(vals), width, color=color, label=label)
             if metric == 'p50_ms':
-                ax.plot(pos, p99, '_', color='k', ms=12)
-        key = 'throughput_target_fps' if metric == 'fps' else 'latency_target_ms'
-        for j, size in enumerate(sizes):
-            target = doc['targets'].get(size, {}).get(key)
-            if target:
-                ax.plot([j - 0.4, j + 0.4], [target, target], 'r--', lw=1)
+                ax.plot(pos, p99, '_', color='k', ms=14)
         ax.set_xticks(x, sizes)
-        ax.set_title(title + ' (red: target)', fontsize=10)
         ax.grid(axis='y', alpha=0.3)
-        if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=8)
-    ax = axes[2]
+
+    def targets(ax: Any, key: str, style: str, label: str) -> None:
+        for j, size in enumerate(sizes):
+            value = doc['targets'].get(size, {}).get(key)
+            if value:
+                ax.plot([j - 0.4, j + 0.4], [value, value], style, lw=1.2,
+                        label=label if j == 0 else None)
+
+    ax = axes[0, 0]
+    bars(ax, (('passthrough', 'shm', 'flat out', 'pass-through', 'tab:gray'),
+              ('node', 'shm', 'flat out', 'correct_node', 'tab:blue')), 'fps')
+    targets(ax, 'throughput_target_fps', 'r--', 'target 0.8 x min(pass-through, 1/remap)')
+    targets(ax, 'serial_bound_fps', 'k:', 'serial bound 1/(1/pass-through + remap)')
+    ax.set_title('throughput, publisher flat out, shm profile [fps]', fontsize=10)
+    ax = axes[0, 1]
+    bars(ax, (('passthrough', 'shm', f'{RATE_HZ:g} Hz', 'pass-through', 'tab:gray'),
+              ('node', 'shm', f'{RATE_HZ:g} Hz', 'correct_node', 'tab:blue')), 'p50_ms')
+    targets(ax, 'latency_target_ms', 'r--', 'target: pass-through p50 + 1.5 x remap')
+    ax.set_title(f'latency at {RATE_HZ:g} Hz, shm profile: p50 (bar), p99 (tick) [ms]',
+                 fontsize=10)
+    ax = axes[1, 0]
+    bars(ax, (('passthrough', 'shm', f'{RATE_HZ:g} Hz', 'pass-through, shm profile',
+               'tab:gray'),
+              ('node', 'shm', f'{RATE_HZ:g} Hz', 'correct_node, shm profile', 'tab:blue'),
+              ('passthrough', 'default', f'{RATE_HZ:g} Hz', 'pass-through, default transports',
+               'silver'),
+              ('node', 'default', f'{RATE_HZ:g} Hz', 'correct_node, default transports',
+               'lightsteelblue')), 'fps')
+    ax.axhline(RATE_HZ, color='k', lw=0.8, ls=':', label=f'published: {RATE_HZ:g} fps')
+    ax.set_title(f'frames delivered of a {RATE_HZ:g} Hz best-effort stream [fps]', fontsize=10)
+    ax = axes[1, 1]
     sets = [r for r in doc['children'].get('shm', {}).get('set_parameters', [])
             if 'reply_to_first_new_frame_ms' in r]
     for j, size in enumerate(sizes):
@@ -740,9 +802,11 @@ def write_plot(doc: Mapping[str, Any], out_dir: Path) -> str:
                label='target: 2 frame periods at 30 fps')
     ax.set_xticks(range(len(sizes)), sizes)
     ax.set_xlim(-0.5, len(sizes) - 0.5)
-    ax.set_title('set_parameters reply -> first frame of the new model [ms]', fontsize=10)
     ax.grid(axis='y', alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.set_title('set_parameters reply -> first frame of the new model [ms]', fontsize=10)
+    for ax in axes.ravel():
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=8)
     fig.tight_layout()
     path = out_dir / 'node_latency.png'
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -776,7 +840,10 @@ def tables(doc: Mapping[str, Any]) -> list[str]:
              'shm = config/fastdds_shm.xml in every process; default = Fast DDS builtin '
              'transports. All with the Makefile MALLOC_* settings. Relay CPU ms/frame = the '
              "relay process's CPU time per delivered frame; node callback = correct_node's "
-             'own per-frame time from its /diagnostics.', '']
+             'own per-frame time from its /diagnostics; others cores = CPU used by processes '
+             'outside the measurement (a window with more than '
+             f'{BUSY_OTHERS_CORES:g} was measured once more and the less disturbed one kept).',
+             '']
     rows = []
     for transport, child in doc['children'].items():
         for run in child['runs']:
@@ -816,9 +883,9 @@ def tables(doc: Mapping[str, Any]) -> list[str]:
         lines += ['', 'Errors: ' + '; '.join(e.splitlines()[0] for e in doc['errors'])]
     figs = doc.get('figures') or {}
     if 'node' in figs:
-        lines += ['', f"![node throughput and latency]({figs['node']}) Node throughput, "
-                  'latency and parameter-set reaction against the pass-through, with and '
-                  'without the shared-memory profile.']
+        lines += ['', f"![node throughput and latency]({figs['node']}) Node throughput and "
+                  'latency against the pass-through, frames delivered with and without the '
+                  'shared-memory profile, and the parameter-set reaction.']
     lines += ['', f"Machine: {machine_line(doc['machine'])}.", '']
     return lines
 

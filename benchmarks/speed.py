@@ -52,7 +52,7 @@ CASE2_YAML = REPO / 'config' / 'case2.yaml'
 SIZES = ((640, 480), (1280, 720), (1920, 1080), (3840, 2160))
 ENCODINGS = {'rgb8': 3, 'mono8': 1}
 #: Timed calls per variant and round, and rounds, by frame width.
-FRAME_REPS = {640: 20, 1280: 10, 1920: 6, 3840: 2}
+FRAME_REPS = {640: 40, 1280: 25, 1920: 10, 3840: 3}
 FRAME_ROUNDS = {640: 5, 1280: 5, 1920: 5, 3840: 4}
 BUILD_REPS = {640: 8, 1280: 6, 1920: 5, 3840: 2}
 BUILD_ROUNDS = {640: 4, 1280: 4, 1920: 5, 3840: 3}
@@ -177,24 +177,27 @@ def per_frame(model: LensModel, rectifier: Rectifier, maps: Mapping[str, Any],
     dst = {name: np.empty(shape, np.uint8) for name in ('copy', 'ours', 'cv', 'ig', 'lf')}
     copy_dst = np.empty_like(src)
     ig = ImageGeometryWay(model)
-    variants = [Variant('copy', lambda: np.copyto(copy_dst, src), 1, {'kind': 'copy'})]
+    # Groups: the copy alone (back to back, warm: the floor), ours and OpenCV's map types
+    # interleaved call by call (the comparison of the target), and each peer alone.
+    variants = [Variant('copy', lambda: np.copyto(copy_dst, src), 1, {'kind': 'copy'},
+                        'copy')]
     for threads in (1, 2):
         variants.append(Variant(f'ours {threads}t', lambda: rectifier.correct(src, dst['ours']),
-                                threads, {'kind': 'ours'}))
+                                threads, {'kind': 'ours'}, 'remap'))
         for name in CV_MAPS:
             m1, m2 = maps[name]
             variants.append(Variant(
                 f'cv {name} {threads}t',
                 lambda m1=m1, m2=m2: cv2.remap(src, m1, m2, cv2.INTER_LINEAR, dst=dst['cv'],
                                                borderMode=cv2.BORDER_CONSTANT),
-                threads, {'kind': 'opencv', 'maps': name}))
+                threads, {'kind': 'opencv', 'maps': name}, 'remap'))
         variants.append(Variant(f'image_geometry {threads}t',
                                 lambda: ig.rectify_image(src, dst['ig']), threads,
-                                {'kind': 'image_geometry'}))
+                                {'kind': 'image_geometry'}, 'image_geometry'))
         if lensfun is not None:
             variants.append(Variant(f'lensfunpy {threads}t',
                                     lambda: lensfun.remap(src, dst['lf']), threads,
-                                    {'kind': 'lensfunpy'}))
+                                    {'kind': 'lensfunpy'}, 'lensfunpy'))
     timings, others = interleave(variants, rounds, reps, quiet_wait_s)
     # Same job: our output and OpenCV's 16SC2 output from the equivalent D.
     rectifier.correct(src, dst['ours'])
@@ -467,8 +470,9 @@ def tables(doc: Mapping[str, Any]) -> list[str]:
          'lensfunpy way', 'others cores (max)'], rows)
     met = [f['ratios']['target_met'] for f in doc['per_frame'].values()]
     lines += ['', f"Target 'no slower than the best OpenCV configuration' (within "
-              f"{doc['noise_band']:.0%} noise): {'met' if all(met) else 'MISSED'} at "
-              f'{sum(met)}/{len(met)} frame types (judged on the minima).', '']
+              f"{doc['noise_band']:.0%} noise, judged on the minima): "
+              f"{'met' if all(met) else 'MISSED'} ({sum(met)} of {len(met)} frame types "
+              'within the band).', '']
     lines += ['### Model + map rebuild (ms, min / median)', '']
     rows = []
     for size, b in doc['rebuild'].items():

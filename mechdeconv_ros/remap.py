@@ -50,13 +50,13 @@ def _quadrant_scale(model: LensModel, xn: npt.NDArray[np.float32],
     with np.errstate(invalid='ignore', divide='ignore'):
         table = np.where(curve.ideal_mm > 0.0, curve.real_mm / curve.ideal_mm, 1.0)
     table = np.ascontiguousarray(table[None, :], dtype=np.float32)
-    rho = cv2.magnitude(np.broadcast_to(xn[None, :], (len(yn), len(xn))).copy(),
-                        np.broadcast_to(yn[:, None], (len(yn), len(xn))).copy())
-    index = rho * np.float32(v / step)
-    zero = np.zeros_like(index)
-    scale = cv2.remap(table, index, zero, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+    # One CV_32FC2 map (x = table index, y = 0 on the one-row table) for cv2.remap.
+    index = np.zeros((len(yn), len(xn), 2), np.float32)
+    np.hypot(xn[None, :], yn[:, None], out=index[..., 0])
+    index[..., 0] *= np.float32(v / step)
+    scale = cv2.remap(table, index, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
                       borderValue=-1.0)
-    scale[index > samples - 1] = -1.0
+    scale[index[..., 0] > samples - 1] = -1.0
     return scale
 
 
@@ -117,7 +117,27 @@ class Rectifier:
         self.model = model
         map_x, map_y = build_float_maps(model)
         self.map1, self.map2 = cv2.convertMaps(map_x, map_y, cv2.CV_16SC2)
-        self.nearest_map, _ = cv2.convertMaps(map_x, map_y, cv2.CV_16SC2, nninterpolation=True)
+        self._nearest_map: np.ndarray | None = None
+
+    @property
+    def nearest_map(self) -> np.ndarray:
+        """
+        Return the nearest-neighbour CV_16SC2 map, derived on first use.
+
+        Only depth images need it, so a rebuild does not pay for it. It is the fixed-point map
+        rounded to the nearest source pixel (OpenCV's ``INTER_TAB_SIZE`` = 32 fractions per
+        pixel, ``map2`` packs ``32 * frac_y + frac_x``). It differs from converting the float
+        maps with ``nninterpolation=True`` only where a source position lies within 1/64 px of
+        the half-way point between two pixels, where either neighbour is as near.
+        """
+        if self._nearest_map is None:
+            frac_x = (self.map2 & 31).astype(np.int16)
+            frac_y = (self.map2 >> 5).astype(np.int16)
+            nearest = self.map1.copy()
+            nearest[..., 0] += frac_x >= 16
+            nearest[..., 1] += frac_y >= 16
+            self._nearest_map = nearest
+        return self._nearest_map
 
     @property
     def out_shape(self) -> tuple[int, int]:
