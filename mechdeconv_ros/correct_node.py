@@ -17,11 +17,13 @@ Topics (relative names, so namespaces and remaps apply; ``/diagnostics`` is abso
 
 Parameters are the schema of :mod:`mechdeconv_ros.params`, declared at start-up with full
 descriptors. A set is validated in the on-set callback by building the candidate model
-(rejected sets leave everything untouched, with the model's reason). An accepted set of model
-parameters is handed to a rebuild thread, which builds the LensModel and the remap tables and
-then swaps one reference; frames keep being corrected with the old model meanwhile, and a frame
-reads the reference once, so it never mixes two models. Sets that arrive while a rebuild runs
-are coalesced: the thread always builds the newest accepted values.
+(rejected sets leave everything untouched, with the model's reason). The two set services
+are wrapped so that no request can stop the node and every refusal names its parameter
+(``_guard_parameter_services``); a prescription has at most :data:`MAX_SURFACES` surfaces.
+An accepted set of model parameters is handed to a rebuild thread, which builds the LensModel
+and the remap tables and then swaps one reference; frames keep being corrected with the old
+model meanwhile, and a frame reads the reference once, so it never mixes two models. Sets that
+arrive while a rebuild runs are coalesced: the thread always builds the newest accepted values.
 
 A frame of a new size (the first frame, or a camera that changed resolution) is corrected by a
 model built synchronously for it in the frame callback: that one frame is late by the build
@@ -45,6 +47,7 @@ import ctypes.util
 from dataclasses import dataclass
 import json
 import math
+import signal
 import sys
 import threading
 import time
@@ -59,19 +62,22 @@ from mechdeconv_ros.model import build_model, LensModel
 from mechdeconv_ros.params import coerce, MODEL_PARAMS, ParamSpec, ParamValue, SCHEMA, SPECS
 from mechdeconv_ros.remap import Rectifier
 from rcl_interfaces.msg import (
-    FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult)
+    FloatingPointRange, IntegerRange, Parameter as ParameterMsg, ParameterDescriptor,
+    SetParametersResult)
+from rcl_interfaces.srv import SetParameters, SetParametersAtomically
 import rclpy
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.exceptions import (
     InvalidParameterTypeException, InvalidParameterValueException,
-    ParameterUninitializedException)
-from rclpy.executors import ExternalShutdownException
+    ParameterNotDeclaredException, ParameterUninitializedException)
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
 from rclpy.qos import (
     DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
 from rclpy.qos_overriding_options import QoSOverridingOptions
+from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
 from sensor_msgs.msg import CameraInfo, Image
 
@@ -84,6 +90,14 @@ LAZY_POLL_S = 0.5
 DIAGNOSTICS_PERIOD_S = 1.0
 #: Minimum seconds between two log lines of the same per-frame problem.
 LOG_THROTTLE_S = 5.0
+#: Longest wait of the spin loop before it looks at the stop flag of SIGINT/SIGTERM, s.
+STOP_POLL_S = 0.1
+#: Most surfaces a prescription (``lens.surfaces.*``) may have: as many as ``lens.stop_surface``
+#: can index. Validating a set traces every surface in the executor thread (about 0.2 ms per
+#: surface), so an unbounded array would stall the frames for as long as the sender likes.
+MAX_SURFACES = int(SPECS['lens.stop_surface'].maximum) + 1
+#: The type codes of rcl_interfaces/msg/ParameterType that rclpy can parse.
+PARAMETER_TYPES = frozenset(t.value for t in Parameter.Type)
 
 
 def sensor_qos() -> QoSProfile:
@@ -222,12 +236,15 @@ class CorrectNode(Node):
         self._last_rebuild_ms = math.nan
         self._validated: tuple[tuple[Any, ...], LensModel] | None = None
         self._report_cache: tuple[int, dict[str, Any]] | None = None
+        self._report_wanted = False
         self._failed_build: tuple[int, int, int] | None = None
         self._stats = FrameStats()
         self._pool = OutputImagePool()
         self._subscription: Subscription | None = None
         self._worker: threading.Thread | None = None
+        self._allow_undeclared = bool(kwargs.get('allow_undeclared_parameters', False))
         super().__init__('correct_node', **kwargs)
+        self._guard_parameter_services()
 
         self._values = self._declare_parameters()
         # Validate the assembled start-up set once (raises ModelError with the reason).
@@ -305,7 +322,9 @@ class CorrectNode(Node):
         values: dict[str, ParamValue] = {}
         for spec in SCHEMA:
             try:
-                values[spec.name] = coerce(spec, _plain(self.get_parameter(spec.name).value))
+                value = self.get_parameter(spec.name).value
+                _check_length(spec, value)
+                values[spec.name] = coerce(spec, _plain(value))
             except ParameterUninitializedException:
                 values[spec.name] = coerce(spec, spec.default)
             except ValueError as err:
@@ -329,9 +348,99 @@ class CorrectNode(Node):
             spec = SPECS.get(param.name)
             if spec is None:
                 continue
+            _check_length(spec, param.value)
             values[param.name] = coerce(spec, _plain(param.value))
             changed.add(param.name)
         return values, changed
+
+    def _guard_parameter_services(self) -> None:
+        """
+        Wrap rclpy's set_parameters and set_parameters_atomically services.
+
+        rclpy's own handlers let a malformed request kill the node (a type code outside
+        rcl_interfaces/msg/ParameterType raises in the executor, which ends ``spin``), lose the
+        names of undeclared parameters (its generator is consumed by ``any()``, so the reason
+        lists ``[]``; a parameter named ``''`` is even declared), and refuse a wrong type or an
+        undeclare without saying which parameter. The wrappers refuse the first two with a
+        reason naming the parameter, put the name in front of the others, and turn any other
+        exception into a refusal: a request can fail, the node cannot.
+        """
+        for service in self.services:
+            if service.srv_type is SetParameters:
+                service.callback = self._guarded_set_parameters(service.callback)
+            elif service.srv_type is SetParametersAtomically:
+                service.callback = self._guarded_set_parameters_atomically(service.callback)
+
+    def _guarded_set_parameters(self, handler: Any) -> Any:
+        def callback(request: Any, response: Any) -> Any:
+            for msg in request.parameters:
+                reason = self._refusal_before_rclpy(msg)
+                if reason is None:
+                    single = SetParameters.Response()
+                    try:
+                        handler(SetParameters.Request(parameters=[msg]), single)
+                        result = single.results[0]
+                    except Exception as err:    # noqa: B902 - a request fails, not the node
+                        result = SetParametersResult(successful=False,
+                                                     reason=f'{msg.name}: {err}')
+                    result = self._name_in_reason(result, [msg])
+                else:
+                    result = SetParametersResult(successful=False, reason=reason)
+                response.results.append(result)
+            return response
+        return callback
+
+    def _guarded_set_parameters_atomically(self, handler: Any) -> Any:
+        def callback(request: Any, response: Any) -> Any:
+            reasons = [reason for reason in map(self._refusal_before_rclpy, request.parameters)
+                       if reason is not None]
+            if reasons:
+                response.result = SetParametersResult(successful=False,
+                                                      reason='; '.join(reasons))
+                return response
+            try:
+                handler(request, response)
+            except Exception as err:    # noqa: B902 - a request fails, not the node
+                response.result = SetParametersResult(
+                    successful=False, reason=f'{", ".join(p.name for p in request.parameters)}'
+                                             f': {err}')
+            response.result = self._name_in_reason(response.result, request.parameters)
+            return response
+        return callback
+
+    def _refusal_before_rclpy(self, msg: ParameterMsg) -> str | None:
+        """Return why rclpy must not see this parameter message, or None."""
+        if msg.value.type not in PARAMETER_TYPES:
+            return (f'{msg.name}: unknown parameter type {msg.value.type} (rcl_interfaces/msg/'
+                    f'ParameterType has {min(PARAMETER_TYPES)} to {max(PARAMETER_TYPES)})')
+        if not self._allow_undeclared and not self.has_parameter(msg.name):
+            return f'{msg.name!r}: correct_node has no such parameter (see ros2 param list)'
+        return None
+
+    def _name_in_reason(self, result: SetParametersResult,
+                        messages: Iterable[ParameterMsg]) -> SetParametersResult:
+        """Put the parameter at fault in front of a refusal that does not name it."""
+        messages = list(messages)
+        if result.successful or any(m.name and m.name in result.reason for m in messages):
+            return result
+        culprit = messages[0].name if messages else ''
+        hint = ''
+        for msg in messages:
+            try:
+                descriptor = self.describe_parameter(msg.name)
+            except ParameterNotDeclaredException:
+                continue
+            if descriptor.read_only or (not descriptor.dynamic_typing and msg.value.type not in (
+                    descriptor.type, Parameter.Type.NOT_SET.value)):
+                culprit = msg.name
+                spec = SPECS.get(msg.name)
+                if spec is not None and msg.value.type == Parameter.Type.INTEGER.value:
+                    hint = _type_hint(spec)
+                break
+            if msg.value.type == Parameter.Type.NOT_SET.value:
+                culprit = msg.name
+                break
+        return SetParametersResult(successful=False, reason=f'{culprit}: {result.reason}{hint}')
 
     def _on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
         """
@@ -446,6 +555,8 @@ class CorrectNode(Node):
         self._active = installed                # the one atomic swap frames see
         self._last_rebuild_ms = candidate.build_ms
         self._rebuild_error = ''
+        self._report_wanted = True              # the rebuild thread summarises it
+        self._lock.notify_all()
         if installed.values_generation < self._values_generation:
             self._rebuild_pending = True
             self._lock.notify_all()
@@ -466,37 +577,54 @@ class CorrectNode(Node):
         """Rebuild the model whenever an accepted set asks for it; coalesce bursts."""
         while True:
             with self._lock:
-                while not (self._rebuild_pending or self._stopping):
+                while not (self._rebuild_pending or self._report_wanted or self._stopping):
                     self._lock.wait()
                 if self._stopping:
                     return
-                self._rebuild_pending = False
+                rebuild, self._rebuild_pending = self._rebuild_pending, False
+                self._report_wanted = False
                 values, generation = dict(self._values), self._values_generation
                 size = self._input_size
-            if size is None and not self._sensor_size_fixed(values):
-                continue        # no frame yet: the first frame builds with the newest values
-            size = size or NOMINAL_SIZE
-            try:
-                candidate = self._build(values, generation, size)
-            except Exception as err:    # noqa: B902 - keep the thread and the old model alive
-                with self._lock:
-                    self._rebuild_failures += 1
-                    self._rebuild_error = str(err)
-                self.get_logger().error(
-                    f'rebuild failed, the previous model stays in use: {err}')
-                continue
+                active = self._active
+            if rebuild:
+                self._rebuild(values, generation, size, active)
+            # The model in use gets its summary (cached per revision: free when it has one).
+            self._summarize(self._active)
+
+    def _rebuild(self, values: dict[str, ParamValue], generation: int,
+                 size: tuple[int, int] | None, active: ActiveModel | None) -> None:
+        """Build and install the model of the newest accepted values (rebuild thread)."""
+        if (active is not None and active.values_generation == generation
+                and (active.model.width, active.model.height) == size):
+            return          # a burst was coalesced into a build that is already in use
+        if size is None and not self._sensor_size_fixed(values):
+            return          # no frame yet: the first frame builds with the newest values
+        size = size or NOMINAL_SIZE
+        try:
+            candidate = self._build(values, generation, size)
+        except Exception as err:    # noqa: B902 - keep the thread and the old model alive
             with self._lock:
-                if self._input_size is not None and self._input_size != size:
-                    # A frame of another size arrived meanwhile and built its own model; make
-                    # sure the newest values get built for that size too.
-                    if generation >= self._values_generation:
-                        self._rebuild_pending = True
-                    continue
-                installed = self._install_locked(candidate)
-            try:
-                self._report_of(installed)      # off the critical path, for diagnostics
-            except Exception as err:    # noqa: B902 - a summary must not stop the rebuilds
-                self.get_logger().warning(f'model summary failed: {err!r}')
+                self._rebuild_failures += 1
+                self._rebuild_error = str(err)
+            self.get_logger().error(f'rebuild failed, the previous model stays in use: {err}')
+            return
+        with self._lock:
+            if self._input_size is not None and self._input_size != size:
+                # A frame of another size arrived meanwhile and built its own model; make sure
+                # the newest values get built for that size too.
+                if generation >= self._values_generation:
+                    self._rebuild_pending = True
+                return
+            self._install_locked(candidate)
+
+    def _summarize(self, active: ActiveModel | None) -> None:
+        """Compute the summary of a model for diagnostics (rebuild thread; never raises)."""
+        if active is None:
+            return
+        try:
+            self._report_of(active)
+        except Exception as err:    # noqa: B902 - a summary must not stop the rebuilds
+            self.get_logger().warning(f'model summary failed: {err!r}')
 
     def _model_for_frame(self, width: int, height: int) -> ActiveModel | None:
         """
@@ -521,14 +649,19 @@ class CorrectNode(Node):
                 f'dropping frames: {self._stats.last_error}; set both to 0 to follow the '
                 'images, or fix the camera resolution', throttle_duration_sec=LOG_THROTTLE_S)
             return None
-        with self._lock:
-            self._input_size = (width, height)
         if self._failed_build == (generation, width, height):
             self._stats.frames_dropped += 1     # known to fail: do not rebuild every frame
             return None
+        with self._lock:
+            previous_size, self._input_size = self._input_size, (width, height)
         try:
             candidate = self._build(values, generation, (width, height))
         except Exception as err:        # noqa: B902 - drop the frame, never the node
+            with self._lock:
+                # No model of this size exists: parameter sets and rebuilds keep following
+                # the frames the node does correct, not the one it could not.
+                if self._input_size == (width, height):
+                    self._input_size = previous_size
             self._failed_build = (generation, width, height)
             self._stats.frames_dropped += 1
             self._stats.last_error = f'no model for {width}x{height} px: {err}'
@@ -630,9 +763,11 @@ class CorrectNode(Node):
         """
         Return the model summary of an active model, computed once per revision.
 
-        The summary (tolerance propagation, depth of field, ...) costs a few ms, so it stays
-        off the path from a parameter set to the first corrected frame: the rebuild thread
-        computes it after the swap, or the diagnostics timer on first use.
+        The summary (tolerance propagation, depth of field, ...) costs a few ms for the thick
+        lens but grows with the surfaces of a prescription (about 2.4 s for 256), so it is
+        computed only in the rebuild thread, after the swap: never on the path from a parameter
+        set to the first corrected frame, and never in the executor, where it would hold up the
+        frames. Until it is ready, diagnostics say so (``summary_pending``).
         """
         cached = self._report_cache
         if cached is not None and cached[0] == active.revision:
@@ -678,12 +813,20 @@ class CorrectNode(Node):
         })
         status = DiagnosticStatus(name=f'{self.get_name()}: lens correction', hardware_id='')
         warnings: list[str] = []
+        summary_pending = False
         if active is not None:
             entries['model_values_generation'] = active.values_generation
-            report = self._report_of(active)
-            for key, value in _flatten_report(report):
-                entries[key] = value
-            warnings = list(report.get('warnings', []))
+            cached = self._report_cache
+            if cached is not None and cached[0] == active.revision:
+                for key, value in _flatten_report(cached[1]):
+                    entries[key] = value
+                warnings = list(cached[1].get('warnings', []))
+            else:
+                summary_pending = True
+                with self._lock:
+                    self._report_wanted = True
+                    self._lock.notify_all()
+            entries['summary_pending'] = summary_pending
         if rebuild_error:
             status.level = DiagnosticStatus.ERROR
             status.message = f'rebuild failed, previous model in use: {rebuild_error}'
@@ -699,6 +842,8 @@ class CorrectNode(Node):
         else:
             status.level = DiagnosticStatus.OK
             status.message = f'correcting, model revision {entries["model_revision"]}'
+            if summary_pending:
+                status.message += ' (lens summary being computed)'
         status.values = [KeyValue(key=key, value=_text(value)) for key, value in entries.items()]
         array = DiagnosticArray()
         array.header.stamp = self.get_clock().now().to_msg()
@@ -724,6 +869,13 @@ def _plain(value: Any) -> Any:
     if hasattr(value, 'tolist') and not isinstance(value, (str, bytes)):
         return value.tolist()
     return value
+
+
+def _check_length(spec: ParamSpec, value: Any) -> None:
+    """Refuse a ``lens.surfaces.*`` array longer than :data:`MAX_SURFACES` (before reading it)."""
+    if spec.type == 'double_array' and hasattr(value, '__len__') and len(value) > MAX_SURFACES:
+        raise ValueError(f'{spec.name}: {len(value)} values, more than the {MAX_SURFACES} '
+                         'surfaces a prescription may have')
 
 
 def _type_hint(spec: ParamSpec) -> str:
@@ -784,15 +936,35 @@ def main(args: list[str] | None = None) -> None:
     """
     Run the node until SIGINT/SIGTERM (exit code 0), or exit 1 on invalid parameters.
 
+    SIGINT and SIGTERM only set a flag that the spin loop checks between callbacks. rclpy's own
+    handler would raise KeyboardInterrupt wherever the interpreter happens to be; while a
+    received image is being converted to Python, rclpy turns that into a RuntimeError, and a
+    plain Ctrl-C (or ``ros2 launch`` stopping the node) ends with a traceback and exit code 1.
+    A second signal stops the process the default way, should the shutdown ever hang.
+
     :param args: command-line arguments for rclpy (``--ros-args ...``); default ``sys.argv``.
     """
     keep_large_buffers()
-    rclpy.init(args=args)
+    stop = threading.Event()
+
+    def request_stop(signum: int, frame: Any) -> None:
+        stop.set()
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    previous = {}
+    if threading.current_thread() is threading.main_thread():
+        previous = {sig: signal.signal(sig, request_stop)
+                    for sig in (signal.SIGINT, signal.SIGTERM)}
     node: CorrectNode | None = None
     failed = False
     try:
         node = CorrectNode()
-        rclpy.spin(node)
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        while not stop.is_set() and executor.context.ok():
+            executor.spin_once(timeout_sec=STOP_POLL_S)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except ValueError as err:           # invalid start-up parameters (incl. ModelError)
@@ -802,6 +974,8 @@ def main(args: list[str] | None = None) -> None:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
     if failed:
         sys.exit(1)
 

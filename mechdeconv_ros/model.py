@@ -350,11 +350,11 @@ def _image_size(values: Mapping[str, Any], width: int, height: int) -> tuple[int
                          'sensor.height_px or feed images')
     ow = int(values['output.width_px']) or w
     oh = int(values['output.height_px']) or h
-    for name, pixels in (('sensor.width_px', w * h), ('output.width_px', ow * oh)):
-        if pixels > MAX_FRAME_PIXELS:
-            raise ModelError(name, f'{pixels / 1e6:.0f} Mpx is more than the '
-                                   f'{MAX_FRAME_PIXELS / 1e6:.0f} Mpx a model may use '
-                                   '(memory bound of the maps)')
+    for name, (a, b) in (('sensor.width_px', (w, h)), ('output.width_px', (ow, oh))):
+        if a * b > MAX_FRAME_PIXELS:
+            raise ModelError(name, f'{a}x{b} px ({a * b / 1e6:.1f} Mpx) is more than the '
+                                   f'{MAX_FRAME_PIXELS / 1e6:.1f} Mpx a model may use (the '
+                                   'memory bound of its maps)')
     return w, h, ow, oh
 
 
@@ -492,7 +492,8 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0) -> L
         raise ModelError(_stop_param(vals),
                          f'no chief ray reaches the sensor beyond {reached:.3g} mm of the '
                          f'{edge_real:.3g} mm half-diagonal: the stop position or the lens '
-                         'blocks the field')
+                         'blocks the field, or the sensor is far larger than the image the '
+                         'lens forms')
     boundary = _boundary_points(w, h)
     bx = (boundary[:, 0] - K[0, 2]) * px
     by = (boundary[:, 1] - K[1, 2]) * py

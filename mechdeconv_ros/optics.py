@@ -36,21 +36,20 @@ from __future__ import annotations
 import math
 from typing import Callable, Mapping
 
-from mechdeconv_ros.raytrace import finite_number as _number
-from mechdeconv_ros.raytrace import AFOCAL_POWER_PER_MM, Prescription, Surface
+from mechdeconv_ros.raytrace import AFOCAL_POWER_PER_MM, finite_number, Prescription, Surface
 
 
 def _lens(n: float, r1_mm: float, r2_mm: float,
           t_mm: float) -> tuple[float, float, float, float]:
     """Return the checked n, t, c1, c2 of a thick lens."""
-    n = _number('refractive index', n)
+    n = finite_number('refractive index', n)
     if n < 1:
         raise ValueError(f'refractive index {n:g} < 1')
-    t = _number('thickness', t_mm)
+    t = finite_number('thickness', t_mm)
     if t < 0:
         raise ValueError(f'thickness {t:g} mm < 0')
-    r1 = _number('r1', r1_mm)
-    r2 = _number('r2', r2_mm)
+    r1 = finite_number('r1', r1_mm)
+    r2 = finite_number('r2', r2_mm)
     return n, t, 0.0 if r1 == 0 else 1.0 / r1, 0.0 if r2 == 0 else 1.0 / r2
 
 
@@ -114,8 +113,8 @@ def thick_lens(n: float, r1_mm: float, r2_mm: float, t_mm: float, stop_offset_mm
     """
     n, t, _, _ = _lens(n, r1_mm, r2_mm, t_mm)
     z_h, _ = thick_lens_principal_planes(n, r1_mm, r2_mm, t)
-    offset = _number('stop offset', stop_offset_mm)
-    diameter = _number('aperture diameter', aperture_diameter_mm)
+    offset = finite_number('stop offset', stop_offset_mm)
+    diameter = finite_number('aperture diameter', aperture_diameter_mm)
     if diameter < 0:
         raise ValueError(f'aperture diameter {diameter:g} mm < 0')
     return Prescription(surfaces=(Surface(float(r1_mm), t, n), Surface(float(r2_mm), 0.0, 1.0)),
@@ -132,9 +131,9 @@ def biconvex_for_focal_length(f_mm: float, n: float, t_mm: float) -> float:
     :return: R in mm, the weaker-curvature root (module docstring).
     :raises ValueError: when no such lens exists (t > n f, f <= 0 or n <= 1).
     """
-    f = _number('focal length', f_mm)
-    n = _number('refractive index', n)
-    t = _number('thickness', t_mm)
+    f = finite_number('focal length', f_mm)
+    n = finite_number('refractive index', n)
+    t = finite_number('thickness', t_mm)
     if f <= 0:
         raise ValueError(f'focal length {f:g} mm must be > 0 for a biconvex lens')
     if n <= 1:
@@ -166,7 +165,7 @@ def propagate_sigma(fn: Callable[[dict[str, float]], float], nominal: Mapping[st
     for name, sigma in sigmas.items():
         if name not in nominal:
             raise ValueError(f'sigma given for unknown parameter {name!r}')
-        sigma = _number(f'sigma of {name}', sigma)
+        sigma = finite_number(f'sigma of {name}', sigma)
         if sigma < 0:
             raise ValueError(f'sigma of {name} is {sigma:g} < 0')
         if sigma == 0:
