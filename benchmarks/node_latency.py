@@ -268,7 +268,7 @@ def publisher_main(width: int, height: int, rate_hz: float) -> int:
 class Probe:
     """Subscriber and parameter client on the benchmark's domain."""
 
-    def __init__(self, domain_id: int) -> None:
+    def __init__(self, domain_id: int, name: str = 'bench_probe') -> None:
         """Create the context, the node, the subscriptions and the service client."""
         from diagnostic_msgs.msg import DiagnosticArray
         import rclpy
@@ -282,7 +282,7 @@ class Probe:
         self._rclpy = rclpy
         self.context = Context()
         rclpy.init(context=self.context, domain_id=domain_id)
-        self.node = Node('bench_probe', context=self.context)
+        self.node = Node(name, context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5,

@@ -41,7 +41,6 @@ import math
 import os
 from pathlib import Path
 import statistics
-import struct
 import sys
 import tempfile
 import time
@@ -49,7 +48,7 @@ from typing import Any, Sequence
 
 from benchmarks.common import LoadMonitor, log, machine_info, machine_line, RESULTS, write_json
 from benchmarks.node_latency import (
-    node_argv, Proc, publisher_argv, ros_env)
+    node_argv, Probe, Proc, publisher_argv, ros_env)
 
 WIDTH, HEIGHT, RATE_HZ = 1280, 720, 30.0
 SET_EVERY_S = 30.0
@@ -118,43 +117,21 @@ def memory_verdict(samples: Sequence[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
-class SoakProbe:
-    """Subscriber and parameter client in this process (its own rclpy context)."""
+class SoakProbe(Probe):
+    """
+    The node_latency probe, recording every frame for the whole run.
+
+    It keeps only the newest camera_info D and diagnostics (a 10-minute run would otherwise
+    hold every message), and waits against monotonic deadlines rather than timeouts.
+    """
 
     def __init__(self, domain_id: int) -> None:
-        """Create the context, the node, the subscriptions and the parameter client."""
-        from diagnostic_msgs.msg import DiagnosticArray
-        import rclpy
-        from rclpy.context import Context
-        from rclpy.executors import SingleThreadedExecutor
-        from rclpy.node import Node
-        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-        from rcl_interfaces.srv import SetParameters
-        from sensor_msgs.msg import CameraInfo, Image
-
-        self._rclpy = rclpy
-        self.context = Context()
-        rclpy.init(context=self.context, domain_id=domain_id)
-        self.node = Node('soak_probe', context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5,
-                         reliability=ReliabilityPolicy.BEST_EFFORT)
-        self.node.create_subscription(Image, 'image_rect', self._on_image, qos, raw=True)
-        self.node.create_subscription(CameraInfo, 'camera_info', self._on_info, qos)
-        self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics,
-                                      10)
-        self.set_client = self.node.create_client(SetParameters,
-                                                  '/correct_node/set_parameters')
-        self.frames: list[tuple[int, int]] = []        # (receive ns, stamp ns)
+        """Create the probe (context, node, subscriptions, parameter client)."""
+        super().__init__(domain_id, name='soak_probe')
+        self.recording = True
         self.last_d: tuple[float, ...] | None = None
-        self.infos = 0
-        self.diagnostics: dict[str, str] = {}
-
-    def _on_image(self, data: bytes) -> None:
-        little = data[1] == 1
-        sec, nsec = struct.unpack_from('<iI' if little else '>iI', data, 4)
-        self.frames.append((time.time_ns(), sec * 1_000_000_000 + nsec))
+        self.infos = 0          # type: ignore[assignment] - a count here, not a list
+        self.diagnostics = {}   # type: ignore[assignment] - the newest status here
 
     def _on_info(self, msg: Any) -> None:
         self.last_d = tuple(float(v) for v in msg.d)
@@ -165,7 +142,7 @@ class SoakProbe:
             if 'lens correction' in status.name:
                 self.diagnostics = {kv.key: kv.value for kv in status.values}
 
-    def spin_until(self, predicate: Any, deadline: float) -> bool:
+    def spin_until_deadline(self, predicate: Any, deadline: float) -> bool:
         """Spin until ``predicate()`` or the monotonic ``deadline``; return the predicate."""
         while not predicate():
             if time.monotonic() >= deadline:
@@ -191,25 +168,19 @@ class SoakProbe:
         start = time.monotonic()
         future = self.set_client.call_async(request)
         out: dict[str, Any] = {'value': value}
-        if not self.spin_until(future.done, start + timeout):
+        if not self.spin_until_deadline(future.done, start + timeout):
             out['error'] = 'no reply'
             return out
         replied = time.monotonic()
         result = future.result().results[0]
         out.update({'accepted': bool(result.successful), 'reason': result.reason,
                     'reply_ms': (replied - start) * 1e3})
-        if result.successful and self.spin_until(
+        if result.successful and self.spin_until_deadline(
                 lambda: self.infos > infos and self.last_d != old_d, replied + timeout):
             out['reply_to_new_model_ms'] = (time.monotonic() - replied) * 1e3
         elif result.successful:
             out['error'] = 'no frame of the new model'
         return out
-
-    def close(self) -> None:
-        """Destroy the node and shut the context down."""
-        self.executor.shutdown()
-        self.node.destroy_node()
-        self._rclpy.try_shutdown(context=self.context)
 
 
 def _percentile(values: Sequence[float], q: float) -> float:
@@ -254,11 +225,13 @@ def run(minutes: float, out_dir: Path, set_every_s: float = SET_EVERY_S,
     probe = SoakProbe(domain)
     pub: Proc | None = None
     try:
-        if not probe.spin_until(lambda: probe.node.count_subscribers('/image_raw') > 0,
-                                time.monotonic() + READY_TIMEOUT_S):
+        ready_by = time.monotonic() + READY_TIMEOUT_S
+        if not probe.spin_until_deadline(
+                lambda: probe.node.count_subscribers('/image_raw') > 0, ready_by):
             raise RuntimeError(f'correct_node not ready: {node.stderr_tail()}')
         pub = Proc(publisher_argv(width, height, rate_hz), env, log_dir, 'publisher')
-        if not probe.spin_until(lambda: bool(probe.frames), time.monotonic() + READY_TIMEOUT_S):
+        if not probe.spin_until_deadline(lambda: bool(probe.frames),
+                                         time.monotonic() + READY_TIMEOUT_S):
             raise RuntimeError(f'no frame: {node.stderr_tail()}')
         proc = psutil.Process(node.pid)
         monitor = LoadMonitor(lambda: time.process_time() + node.cpu_s() + pub.cpu_s())
@@ -278,7 +251,7 @@ def run(minutes: float, out_dir: Path, set_every_s: float = SET_EVERY_S,
                 doc['sets'].append(result)
                 set_index += 1
                 next_set = max(next_set + set_every_s, time.monotonic())
-            probe.spin_until(lambda: False, min(next_set, start + tick))
+            probe.spin_until_deadline(lambda: False, min(next_set, start + tick))
             if time.monotonic() < start + tick:
                 continue
             if not node.running():
