@@ -266,6 +266,18 @@ class RosClient:
         """Close."""
         self.close()
 
+    def next_diagnostics(self, diagnostics: list[Any], timeout: float = 3.0) -> dict[str, str]:
+        """
+        Spin until a new message lands in ``diagnostics``; return its first status's values.
+
+        :param diagnostics: the list a /diagnostics subscription appends to.
+        :param timeout: seconds to wait.
+        :return: key -> value of the node's status.
+        """
+        start = len(diagnostics)
+        assert self.spin_until(lambda: len(diagnostics) > start, timeout), 'no /diagnostics'
+        return {kv.key: kv.value for kv in diagnostics[-1].status[0].values}
+
     def spin_until(self, predicate: Callable[[], bool], timeout: float,
                    poll: float = 0.02) -> bool:
         """

@@ -155,11 +155,7 @@ class Harness:
 
     def diag(self, timeout: float = 3.0) -> dict[str, str]:
         """Return the key/values of the next diagnostics message."""
-        start = len(self.diagnostics)
-        assert self.client.spin_until(lambda: len(self.diagnostics) > start, timeout), \
-            'no /diagnostics'
-        status = self.diagnostics[-1].status[0]
-        return {kv.key: kv.value for kv in status.values}
+        return self.client.next_diagnostics(self.diagnostics, timeout)
 
     def revision(self) -> int:
         """Return the model revision the node reports (fresh diagnostics)."""

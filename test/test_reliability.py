@@ -233,11 +233,7 @@ class Link:
 
     def diag(self, timeout: float = 3.0) -> dict[str, str]:
         """Return the key/values of the next diagnostics message."""
-        start = len(self.diagnostics)
-        assert self.client.spin_until(lambda: len(self.diagnostics) > start, timeout), \
-            'no /diagnostics'
-        status = self.diagnostics[-1].status[0]
-        return {kv.key: kv.value for kv in status.values}
+        return self.client.next_diagnostics(self.diagnostics, timeout)
 
     def rss_mib(self) -> float:
         """Return the resident memory of the node process, MiB."""
