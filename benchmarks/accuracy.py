@@ -40,7 +40,6 @@ separate the two.)
 
 from __future__ import annotations
 
-import argparse
 from dataclasses import dataclass
 import json
 import math
@@ -50,7 +49,7 @@ import time
 from typing import Any, Mapping
 
 from benchmarks.common import (
-    fmt_ms, log, machine_info, machine_line, markdown_table, RESULTS, write_json)
+    bench_main, fmt_ms, log, machine_info, machine_line, markdown_table, RESULTS, write_json)
 from mechdeconv_ros.model import build_model, LensModel, radii_mean_error_percent
 from mechdeconv_ros.params import load_params_file
 import numpy as np
@@ -637,13 +636,7 @@ def tables(doc: Mapping[str, Any]) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the benchmark alone and print its table."""
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0].strip())
-    parser.add_argument('--quick', action='store_true', help='few variants (smoke test)')
-    parser.add_argument('--out', type=Path, default=RESULTS, help='results folder')
-    args = parser.parse_args(argv)
-    doc = run(args.out, quick=args.quick)
-    print('\n'.join(tables(doc)))
-    return 0
+    return bench_main(__doc__ or '', run, tables, 'few variants (smoke test)', argv)
 
 
 if __name__ == '__main__':

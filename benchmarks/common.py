@@ -345,3 +345,26 @@ def markdown_table(header: Sequence[str], rows: Iterable[Sequence[Any]]) -> list
 def log(message: str) -> None:
     """Print a progress line to stderr."""
     print(message, file=sys.stderr, flush=True)
+
+
+def bench_main(description: str, run: Callable[..., dict[str, Any]],
+               tables: Callable[[dict[str, Any]], list[str]], quick_help: str,
+               argv: list[str] | None = None) -> int:
+    """
+    Run one benchmark from the command line (``--quick``, ``--out``) and print its tables.
+
+    :param description: the benchmark module's docstring (its first paragraph is shown).
+    :param run: ``run(out_dir, quick=...)`` returning the results document.
+    :param tables: the document -> markdown lines.
+    :param quick_help: what ``--quick`` does for this benchmark.
+    :param argv: the arguments (default ``sys.argv[1:]``).
+    :return: exit status 0.
+    """
+    import argparse
+    parser = argparse.ArgumentParser(description=description.split('\n\n')[0].strip())
+    parser.add_argument('--quick', action='store_true', help=quick_help)
+    parser.add_argument('--out', type=Path, default=RESULTS, help='results folder')
+    args = parser.parse_args(argv)
+    doc = run(args.out, quick=args.quick)
+    print('\n'.join(tables(doc)))
+    return 0

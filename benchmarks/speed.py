@@ -31,7 +31,6 @@ lensfunpy's ``Modifier`` + ``initialize`` + ``apply_geometry_distortion``; 1 and
 
 from __future__ import annotations
 
-import argparse
 import math
 from pathlib import Path
 import sys
@@ -39,8 +38,8 @@ import time
 from typing import Any, Mapping
 
 from benchmarks.common import (
-    fmt_ms, fmt_ratio, interleave, log, machine_info, machine_line, markdown_table, RESULTS,
-    Variant, write_json)
+    bench_main, fmt_ms, fmt_ratio, interleave, log, machine_info, machine_line, markdown_table,
+    RESULTS, Variant, write_json)
 import cv2
 from mechdeconv_ros.model import build_model, LensModel
 from mechdeconv_ros.params import load_params_file
@@ -510,13 +509,7 @@ def tables(doc: Mapping[str, Any]) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the benchmark alone and print its tables."""
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0].strip())
-    parser.add_argument('--quick', action='store_true', help='tiny sizes and repeats')
-    parser.add_argument('--out', type=Path, default=RESULTS, help='results folder')
-    args = parser.parse_args(argv)
-    doc = run(args.out, quick=args.quick)
-    print('\n'.join(tables(doc)))
-    return 0
+    return bench_main(__doc__ or '', run, tables, 'tiny sizes and repeats', argv)
 
 
 if __name__ == '__main__':
