@@ -49,7 +49,8 @@ import time
 from typing import Any, Mapping
 
 from benchmarks.common import (
-    bench_main, fmt_ms, log, machine_info, machine_line, markdown_table, RESULTS, write_json)
+    bench_main, fmt_ms, log, machine_info, machine_line, markdown_table, RESULTS, save_figure,
+    write_json)
 from mechdeconv_ros.model import build_model, LensModel, radii_mean_error_percent
 from mechdeconv_ros.params import load_params_file
 import numpy as np
@@ -495,12 +496,7 @@ def write_plots(doc: Mapping[str, Any], out_dir: Path) -> dict[str, str]:
         ax.set_title(f'Case 2 lens, {SWEEP_TITLES[name]}: optiland ground truth')
         ax.grid(True, which='both', alpha=0.3)
         ax.legend(fontsize=7.5, loc='center right')
-        fig.tight_layout()
-        path = out_dir / FIGURES[name]
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        out[name] = str(path.relative_to(out_dir.parent))
+        out[name] = save_figure(fig, out_dir, FIGURES[name], dpi=110)
     return out
 
 
@@ -550,12 +546,7 @@ def write_grid_figure(panels: Mapping[str, Mapping[str, Any]], out_dir: Path) ->
         ax.grid(alpha=0.3)
     axes[0][-1].legend(fontsize=7.5, loc='lower right', framealpha=0.9)
     fig.suptitle('Case 2 grid, corrected by both models (optiland ground truth)')
-    fig.tight_layout()
-    path = out_dir / 'accuracy_grid.png'
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return str(path.relative_to(out_dir.parent))
+    return save_figure(fig, out_dir, 'accuracy_grid.png')
 
 
 def _pct(value: float | None) -> str:

@@ -368,3 +368,22 @@ def bench_main(description: str, run: Callable[..., dict[str, Any]],
     doc = run(args.out, quick=args.quick)
     print('\n'.join(tables(doc)))
     return 0
+
+
+def save_figure(fig: Any, out_dir: Path, filename: str, dpi: int = 100) -> str:
+    """
+    Lay out, write and close a matplotlib figure in the results folder.
+
+    :param fig: the figure.
+    :param out_dir: the results folder.
+    :param filename: the PNG's name (may include a subfolder).
+    :param dpi: resolution.
+    :return: the path relative to the results folder's parent, as the README links it.
+    """
+    import matplotlib.pyplot as plt
+    fig.tight_layout()
+    path = out_dir / filename
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+    return str(path.relative_to(out_dir.parent))

@@ -62,7 +62,8 @@ import time
 from typing import Any, Mapping, Sequence
 
 from benchmarks.common import (
-    fmt_ms, LoadMonitor, log, machine_info, machine_line, markdown_table, RESULTS, write_json)
+    fmt_ms, LoadMonitor, log, machine_info, machine_line, markdown_table, RESULTS, save_figure,
+    write_json)
 
 REPO = Path(__file__).resolve().parents[1]
 CASE2_YAML = REPO / 'config' / 'case2.yaml'
@@ -807,12 +808,7 @@ def write_plot(doc: Mapping[str, Any], out_dir: Path) -> str:
     for ax in axes.ravel():
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=8)
-    fig.tight_layout()
-    path = out_dir / 'node_latency.png'
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return str(path.relative_to(out_dir.parent))
+    return save_figure(fig, out_dir, 'node_latency.png')
 
 
 def _f(value: Any, digits: int = 1) -> str:

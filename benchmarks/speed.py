@@ -39,7 +39,7 @@ from typing import Any, Mapping
 
 from benchmarks.common import (
     bench_main, fmt_ms, fmt_ratio, interleave, log, machine_info, machine_line, markdown_table,
-    RESULTS, Variant, write_json)
+    RESULTS, save_figure, Variant, write_json)
 import cv2
 from mechdeconv_ros.model import build_model, LensModel
 from mechdeconv_ros.params import load_params_file
@@ -388,12 +388,7 @@ def write_plots(doc: Mapping[str, Any], out_dir: Path) -> dict[str, str]:
         ax.grid(axis='y', which='both', alpha=0.3)
     axes[0].set_ylabel('ms per frame')
     axes[0].legend(fontsize=8)
-    fig.tight_layout()
-    path = out_dir / 'speed_per_frame.png'
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    out['per_frame'] = str(path.relative_to(out_dir.parent))
+    out['per_frame'] = save_figure(fig, out_dir, 'speed_per_frame.png')
 
     fig, ax = plt.subplots(figsize=(7.5, 4.8))
     sizes = list(doc['rebuild'])
@@ -422,11 +417,7 @@ def write_plots(doc: Mapping[str, Any], out_dir: Path) -> dict[str, str]:
     ax.set_title('Model + map rebuild after a parameter change')
     ax.grid(which='both', alpha=0.3)
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    path = out_dir / 'speed_rebuild.png'
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    out['rebuild'] = str(path.relative_to(out_dir.parent))
+    out['rebuild'] = save_figure(fig, out_dir, 'speed_rebuild.png')
     return out
 
 
