@@ -305,6 +305,47 @@ class RosClient:
         msg.header.stamp.nanosec = 1000 * sec
         return stamp_of(msg)
 
+    def answered(self, client: Any, request: Any, timeout: float = 30.0,
+                 attempt: float = 1.0) -> Any:
+        """
+        Send ``request`` until the service answers it; return the response.
+
+        Only for requests that may be served twice (reads, empty sets). It exists for the
+        first call after discovery: Fast DDS sends a reply only once the service's reply
+        writer has matched this client's reply reader, waits 100 ms for that and then drops
+        the reply (ros2/rmw_fastrtps#842), so on a loaded machine the first request can go
+        unanswered although ``wait_for_service`` returned True.
+
+        :param client: the rclpy service client.
+        :param request: the request to (re)send.
+        :param timeout: seconds before the test fails.
+        :param attempt: seconds to wait for each reply before resending.
+        :return: the response.
+        """
+        deadline = time.monotonic() + timeout
+        assert client.wait_for_service(timeout_sec=timeout), f'{client.srv_name} not available'
+        while True:
+            future = client.call_async(request)
+            if self.spin_until(future.done, attempt):
+                return future.result()
+            client.remove_pending_request(future)
+            assert time.monotonic() < deadline, f'{client.srv_name} never answered'
+
+    def wait_until_answering(self, timeout: float = 30.0) -> None:
+        """
+        Return once each parameter service of the node has answered this client.
+
+        Empty requests (they change nothing) are resent until answered (see
+        :meth:`answered`); after that every reply of these services reaches this client, so
+        the calls of the test itself are sent once and must be answered.
+
+        :param timeout: seconds before the test fails.
+        """
+        for client, request in ((self._get, GetParameters.Request()),
+                                (self._set, SetParameters.Request()),
+                                (self._set_atomic, SetParametersAtomically.Request())):
+            self.answered(client, request, timeout)
+
     def call(self, client: Any, request: Any, timeout: float = 10.0) -> Any:
         """Call a service and return its response (fails the test on a timeout)."""
         assert client.wait_for_service(timeout_sec=timeout), f'{client.srv_name} not available'

@@ -126,6 +126,7 @@ def test_installed_node_corrects_a_frame_and_exits_cleanly(
         assert len(received.get(stamp, {})) == 2, 'no output:\n' + proc.output()[-3000:]
         got, _ = image_to_array(received[stamp]['image'])       # type: ignore[arg-type]
         assert got.shape == src.shape and not np.array_equal(got, src)
+        client.wait_until_answering()
         assert client.get_parameters('lens.r1_mm') == {'lens.r1_mm': 4.0}
         assert client.set_parameters(Parameter('lens.stop_offset_mm', value=0.3))[0].successful
         code = proc.stop(signal.SIGINT)

@@ -172,6 +172,7 @@ def harness(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Harness]:
     with NodeProcess(node_command(params, *FOLLOW_IMAGES), ros_env(domain), tmp) as proc:
         client = RosClient(domain)
         try:
+            client.wait_until_answering()
             yield Harness(proc, client, values)
         finally:
             client.close()
@@ -586,6 +587,7 @@ def test_params_file_arrays_load_and_sigterm_exits_cleanly(tmp_path: Path) -> No
     domain = next_domain_id()
     with NodeProcess(node_command(params), ros_env(domain), tmp_path) as proc, \
             RosClient(domain) as client:
+        client.wait_until_answering()
         got = client.get_parameters('lens.surfaces.radius_mm', 'lens.surfaces.thickness_mm',
                                     'lazy_subscription')
         assert list(got['lens.surfaces.radius_mm']) == [4.0, -4.0]

@@ -263,7 +263,11 @@ def start_link(tmp: Path, extra: dict[str, Any], qos: QoSProfile) -> Iterator[Li
         client = RosClient(domain)
         try:
             link = Link(proc, client, domain, values, qos)
-            assert client.get_parameters(STOP)[STOP] == values[STOP]      # up and answering
+            client.wait_until_answering()
+            for service, empty in ((link.set_client, SetParameters.Request()),
+                                   (link.atomic_client, SetParametersAtomically.Request())):
+                client.answered(service, empty)
+            assert client.get_parameters(STOP)[STOP] == values[STOP]
             yield link
         finally:
             client.close()
@@ -970,13 +974,8 @@ def run_storm(domain: int, ready: threading.Event, stop: threading.Event,
                                                 '/correct_node/set_parameters_atomically',
                                                 qos_profile=qos_profile_parameters)}
             for atomic, service in services.items():
-                assert service.wait_for_service(timeout_sec=10.0)
-                # An empty request until one is answered: a reply sent before the node has
-                # discovered this client's reply reader is lost (DDS matching is not symmetric).
-                empty = (SetParametersAtomically.Request() if atomic
-                         else SetParameters.Request())
-                assert any(client.spin_until(service.call_async(empty).done, 0.5)
-                           for _ in range(20)), 'no reply from the parameter service'
+                client.answered(service, SetParametersAtomically.Request() if atomic
+                                else SetParameters.Request(), timeout=10.0, attempt=0.5)
             ready.set()
             pending: list[StormReply] = []
             atomic, sent, valid = False, 0, 0
