@@ -20,10 +20,13 @@ descriptors. A set is validated in the on-set callback by building the candidate
 (rejected sets leave everything untouched, with the model's reason). The two set services
 are wrapped so that no request can stop the node and every refusal names its parameter
 (``_guard_parameter_services``); a prescription has at most :data:`MAX_SURFACES` surfaces.
-An accepted set of model parameters is handed to a rebuild thread, which builds the LensModel
-and the remap tables and then swaps one reference; frames keep being corrected with the old
-model meanwhile, and a frame reads the reference once, so it never mixes two models. Sets that
-arrive while a rebuild runs are coalesced: the thread always builds the newest accepted values.
+An accepted set of model parameters is built (LensModel, reusing the on-set candidate, and
+the remap tables) at the end of its request, before the reply, and installed by swapping one
+reference: when ``ros2 param set`` returns, the next frame is corrected by the new model. A
+frame reads the reference once, so it never mixes two models. A set that does not come
+through the services (a composed node's own call) is built by a rebuild thread instead, which
+coalesces bursts and always builds the newest accepted values; the same thread computes the
+model summary for /diagnostics after the swap, off the frame path.
 
 A frame of a new size (the first frame, or a camera that changed resolution) is corrected by a
 model built synchronously for it in the frame callback: that one frame is late by the build
@@ -32,11 +35,10 @@ disagrees, the frame is dropped and counted, with a throttled error.
 
 Threads: the node spins in rclpy's SingleThreadedExecutor and keeps the frame callback short
 (1080p rgb8: ~12 ms, mostly ``cv2.remap`` into the preallocated message), so a parameter
-service call waits at most one frame; the expensive part of a parameter change (the remap
-tables) runs in the rebuild thread. Measured on a 2-vCPU VM at 30 fps, rclpy's
-MultiThreadedExecutor (two threads, the frames in their own callback group) was much worse:
-its wait loop kept a core busy, 640x480 output fell from 30 to 5 fps and 1080p from 30 to
-18 fps. The frame callback still has its own mutually exclusive group, so the node stays
+service call waits at most one frame, and a frame at most one rebuild (1080p: ~10 ms).
+Measured on a 2-vCPU VM at 30 fps, rclpy's MultiThreadedExecutor (two threads, the frames in
+their own callback group) was much worse: its wait loop kept a core busy, 640x480 output fell
+from 30 to 5 fps and 1080p from 30 to 18 fps. The frame callback still has its own mutually exclusive group, so the node stays
 correct when a user composes it into a multi-threaded executor.
 """
 
@@ -226,6 +228,7 @@ class CorrectNode(Node):
         self._values: dict[str, ParamValue] = {}
         self._values_generation = 0
         self._rebuild_pending = False
+        self._rebuild_requested = False
         self._stopping = False
         self._input_size: tuple[int, int] | None = None
         self._active: ActiveModel | None = None
@@ -387,6 +390,7 @@ class CorrectNode(Node):
                 else:
                     result = SetParametersResult(successful=False, reason=reason)
                 response.results.append(result)
+            self._rebuild_before_reply()
             return response
         return callback
 
@@ -405,6 +409,7 @@ class CorrectNode(Node):
                     successful=False, reason=f'{", ".join(p.name for p in request.parameters)}'
                                              f': {err}')
             response.result = self._name_in_reason(response.result, request.parameters)
+            self._rebuild_before_reply()
             return response
         return callback
 
@@ -482,15 +487,40 @@ class CorrectNode(Node):
             if model_changed:               # setting a parameter to its value rebuilds nothing
                 self._values_generation += 1
         if model_changed:
-            # Rebuild once the executor is done with this request: rclpy's parameter service
-            # applies a multi-parameter set_parameters (what `ros2 param load` sends) one
-            # parameter at a time inside one callback, and that must give one rebuild, not
-            # one per parameter. The guard condition's callback runs after it returns.
+            # Rebuild once per request, not per parameter: rclpy's parameter service applies a
+            # multi-parameter set_parameters (what `ros2 param load` sends) one parameter at a
+            # time inside one callback. The wrapped services rebuild at the end of the request,
+            # before replying; the guard condition (its callback runs after the request) is
+            # the fallback for a set that does not come through them, e.g. a composed node's
+            # own set_parameters() call, and finds nothing left to do otherwise.
+            self._rebuild_requested = True
             self._rebuild_trigger.trigger()
         if 'remap_threads' in changed:
             self._apply_threads(values)
         if 'lazy_subscription' in changed:
             self._update_subscription()
+
+    def _rebuild_before_reply(self) -> None:
+        """
+        Build and install the model of an accepted request before its reply is sent.
+
+        So a reply means the new model is in force: the next frame corrected is corrected with
+        it (a reply -> first-frame delay of one frame period at most, plus the frame's own
+        time). The build runs in the executor thread, so frames wait for it (1080p: ~10 ms),
+        which they would do anyway, with two cores, for a build in another thread. A failed
+        build keeps the previous model (counted, logged, on /diagnostics), as in the rebuild
+        thread; the values stay accepted, and the next set or frame size retries.
+        """
+        if not self._rebuild_requested:
+            return
+        self._rebuild_requested = False
+        try:
+            with self._lock:
+                values, generation = dict(self._values), self._values_generation
+                size, active = self._input_size, self._active
+            self._rebuild(values, generation, size, active)
+        except Exception as err:    # noqa: B902 - the reply must go out whatever happens
+            self.get_logger().error(f'rebuild before the reply failed: {err!r}')
 
     def _request_rebuild(self) -> None:
         """Wake the rebuild thread for the newest accepted values (guard-condition callback)."""
@@ -532,7 +562,10 @@ class CorrectNode(Node):
 
     def _install_locked(self, candidate: ActiveModel) -> ActiveModel:
         """
-        Swap a freshly built model in, unless a newer one of the same size is active.
+        Swap a freshly built model in, unless the same or a newer one of its size is active.
+
+        (The same one: a request's own rebuild and the rebuild thread can both build the
+        newest values; the second build is not a new revision.)
 
         Call with ``self._lock`` held. When the model installed is older than the newest
         accepted parameters, the rebuild thread is asked to build those.
@@ -542,7 +575,7 @@ class CorrectNode(Node):
         """
         current = self._active
         if (current is not None
-                and current.values_generation > candidate.values_generation
+                and current.values_generation >= candidate.values_generation
                 and (current.model.width, current.model.height)
                 == (candidate.model.width, candidate.model.height)):
             return current
