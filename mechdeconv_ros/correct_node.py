@@ -38,8 +38,9 @@ Threads: the node spins in rclpy's SingleThreadedExecutor and keeps the frame ca
 service call waits at most one frame, and a frame at most one rebuild (1080p: ~10 ms).
 Measured on a 2-vCPU VM at 30 fps, rclpy's MultiThreadedExecutor (two threads, the frames in
 their own callback group) was much worse: its wait loop kept a core busy, 640x480 output fell
-from 30 to 5 fps and 1080p from 30 to 18 fps. The frame callback still has its own mutually exclusive group, so the node stays
-correct when a user composes it into a multi-threaded executor.
+from 30 to 5 fps and 1080p from 30 to 18 fps. The frame callback still has its own mutually
+exclusive group, so the node stays correct when a user composes it into a multi-threaded
+executor.
 """
 
 from __future__ import annotations
