@@ -32,7 +32,7 @@ Parameter set -> first new frame (shm only): with the publisher at 30 Hz, the pr
 ``/correct_node/set_parameters`` (as ``ros2 param set`` does) to move ``lens.stop_offset_mm``
 between 0.2 and 0.5 mm, and measures from the reply (and from the request) to the first
 ``camera_info`` whose D (the equivalent distortion of the model that corrected that frame) is
-the new one. The node replies once the new model is installed.
+the new one.
 
 Targets (DESIGN.md section 4), from the same run: throughput >= 0.8 x min(pass-through fps,
 1 / bare remap time); latency p50 <= pass-through p50 + 1.5 x bare remap time; set ->

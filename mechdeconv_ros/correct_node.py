@@ -20,12 +20,11 @@ descriptors. A set is validated in the on-set callback by building the candidate
 (rejected sets leave everything untouched, with the model's reason). The two set services
 are wrapped so that no request can stop the node and every refusal names its parameter
 (``_guard_parameter_services``); a prescription has at most :data:`MAX_SURFACES` surfaces.
-An accepted set of model parameters is built (LensModel, reusing the on-set candidate, and
-the remap tables) at the end of its request, before the reply, and installed by swapping one
-reference: when ``ros2 param set`` returns, the next frame is corrected by the new model. A
-frame reads the reference once, so it never mixes two models. A set that does not come
-through the services (a composed node's own call) is built by a rebuild thread instead, which
-coalesces bursts and always builds the newest accepted values; the same thread computes the
+An accepted set of model parameters is answered at once and handed to a rebuild thread, which
+builds the LensModel (reusing the on-set candidate) and the remap tables and then swaps one
+reference; frames keep being corrected with the old model meanwhile, and a frame reads the
+reference once, so it never mixes two models. Sets that arrive while a rebuild runs are
+coalesced: the thread always builds the newest accepted values. The same thread computes the
 model summary for /diagnostics after the swap, off the frame path.
 
 A frame of a new size (the first frame, or a camera that changed resolution) is corrected by a
@@ -35,7 +34,8 @@ disagrees, the frame is dropped and counted, with a throttled error.
 
 Threads: the node spins in rclpy's SingleThreadedExecutor and keeps the frame callback short
 (1080p rgb8: ~12 ms, mostly ``cv2.remap`` into the preallocated message), so a parameter
-service call waits at most one frame, and a frame at most one rebuild (1080p: ~10 ms).
+service call waits at most one frame; the expensive part of a parameter change (the remap
+tables) runs in the rebuild thread.
 Measured on a 2-vCPU VM at 30 fps, rclpy's MultiThreadedExecutor (two threads, the frames in
 their own callback group) was much worse: its wait loop kept a core busy, 640x480 output fell
 from 30 to 5 fps and 1080p from 30 to 18 fps. The frame callback still has its own mutually
@@ -241,6 +241,7 @@ class CorrectNode(Node):
         self._validated: tuple[tuple[Any, ...], LensModel] | None = None
         self._report_cache: tuple[int, dict[str, Any]] | None = None
         self._report_wanted = False
+        self._warmed_size: tuple[int, int] | None = None
         self._failed_build: tuple[int, int, int] | None = None
         self._stats = FrameStats()
         self._pool = OutputImagePool()
@@ -391,7 +392,7 @@ class CorrectNode(Node):
                 else:
                     result = SetParametersResult(successful=False, reason=reason)
                 response.results.append(result)
-            self._rebuild_before_reply()
+            self._start_rebuild_of_request()
             return response
         return callback
 
@@ -410,7 +411,7 @@ class CorrectNode(Node):
                     successful=False, reason=f'{", ".join(p.name for p in request.parameters)}'
                                              f': {err}')
             response.result = self._name_in_reason(response.result, request.parameters)
-            self._rebuild_before_reply()
+            self._start_rebuild_of_request()
             return response
         return callback
 
@@ -490,10 +491,10 @@ class CorrectNode(Node):
         if model_changed:
             # Rebuild once per request, not per parameter: rclpy's parameter service applies a
             # multi-parameter set_parameters (what `ros2 param load` sends) one parameter at a
-            # time inside one callback. The wrapped services rebuild at the end of the request,
-            # before replying; the guard condition (its callback runs after the request) is
-            # the fallback for a set that does not come through them, e.g. a composed node's
-            # own set_parameters() call, and finds nothing left to do otherwise.
+            # time inside one callback. The wrapped services wake the rebuild thread at the end
+            # of the request; the guard condition (its callback runs after the request) is the
+            # fallback for a set that does not come through them, e.g. a composed node's own
+            # set_parameters() call.
             self._rebuild_requested = True
             self._rebuild_trigger.trigger()
         if 'remap_threads' in changed:
@@ -501,27 +502,21 @@ class CorrectNode(Node):
         if 'lazy_subscription' in changed:
             self._update_subscription()
 
-    def _rebuild_before_reply(self) -> None:
+    def _start_rebuild_of_request(self) -> None:
         """
-        Build and install the model of an accepted request before its reply is sent.
+        Hand an accepted request's model change to the rebuild thread before the reply.
 
-        So a reply means the new model is in force: the next frame corrected is corrected with
-        it (a reply -> first-frame delay of one frame period at most, plus the frame's own
-        time). The build runs in the executor thread, so frames wait for it (1080p: ~10 ms),
-        which they would do anyway, with two cores, for a build in another thread. A failed
-        build keeps the previous model (counted, logged, on /diagnostics), as in the rebuild
-        thread; the values stay accepted, and the next set or frame size retries.
+        The reply goes out at once and the maps are built off the executor, so frames keep
+        flowing with the old model meanwhile. Waking the thread here, rather than from the
+        guard condition's callback, saves waiting for the executor to come round to it (up to
+        a frame callback); the guard condition then finds the build under way or done.
         """
         if not self._rebuild_requested:
             return
         self._rebuild_requested = False
-        try:
-            with self._lock:
-                values, generation = dict(self._values), self._values_generation
-                size, active = self._input_size, self._active
-            self._rebuild(values, generation, size, active)
-        except Exception as err:    # noqa: B902 - the reply must go out whatever happens
-            self.get_logger().error(f'rebuild before the reply failed: {err!r}')
+        with self._lock:
+            self._rebuild_pending = True
+            self._lock.notify_all()
 
     def _request_rebuild(self) -> None:
         """Wake the rebuild thread for the newest accepted values (guard-condition callback)."""
@@ -624,6 +619,28 @@ class CorrectNode(Node):
                 self._rebuild(values, generation, size, active)
             # The model in use gets its summary (cached per revision: free when it has one).
             self._summarize(self._active)
+            self._warm_allocator(self._active)
+
+    def _warm_allocator(self, active: ActiveModel | None) -> None:
+        """
+        Build and drop one set of remap tables once per frame size (rebuild thread).
+
+        The first rebuild after a new size is installed otherwise takes its buffers (tens of
+        MB at 1080p: maps and their intermediates) from fresh pages while the active tables
+        hold the others: measured 40-65 ms instead of 8-10 ms at 1920x1080, which made the
+        first parameter sets after start-up miss two frame periods. With the malloc settings
+        of :func:`keep_large_buffers`, the dropped buffers stay in the heap for that rebuild.
+        """
+        if active is None:
+            return
+        size = (active.model.width, active.model.height)
+        if self._warmed_size == size:
+            return
+        self._warmed_size = size
+        try:
+            Rectifier(active.model)
+        except Exception as err:    # noqa: B902 - an optimisation must never stop the thread
+            self.get_logger().warning(f'allocator warm-up failed: {err!r}')
 
     def _rebuild(self, values: dict[str, ParamValue], generation: int,
                  size: tuple[int, int] | None, active: ActiveModel | None) -> None:
