@@ -560,8 +560,8 @@ class CorrectNode(Node):
         """
         Swap a freshly built model in, unless the same or a newer one of its size is active.
 
-        (The same one: a request's own rebuild and the rebuild thread can both build the
-        newest values; the second build is not a new revision.)
+        (The same one: when two builds of the newest values race, say the rebuild thread's
+        and a frame's of a new size, the second is not a new revision.)
 
         Call with ``self._lock`` held. When the model installed is older than the newest
         accepted parameters, the rebuild thread is asked to build those.
