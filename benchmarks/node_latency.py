@@ -68,12 +68,11 @@ from typing import Any, Mapping, Sequence
 from benchmarks.common import (
     fmt_ms, LoadMonitor, log, machine_info, machine_line, markdown_table, RESULTS, save_figure,
     write_json)
+from mechdeconv_ros.graph_env import MALLOC_ENV
 
 REPO = Path(__file__).resolve().parents[1]
 CASE2_YAML = REPO / 'config' / 'case2.yaml'
 FASTDDS_PROFILE = REPO / 'config' / 'fastdds_shm.xml'
-#: The Makefile's glibc settings (no per-message mmap/munmap of multi-MB buffers).
-MALLOC_ENV = {'MALLOC_MMAP_THRESHOLD_': '67108864', 'MALLOC_TRIM_THRESHOLD_': '1073741824'}
 SIZES = ((1280, 720), (1920, 1080))
 QUICK_SIZES = ((320, 240),)
 RATE_HZ = 30.0

@@ -45,8 +45,6 @@ executor.
 
 from __future__ import annotations
 
-import ctypes
-import ctypes.util
 from dataclasses import dataclass
 import json
 import math
@@ -58,6 +56,7 @@ from typing import Any, Iterable, Mapping
 
 import cv2
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from mechdeconv_ros.graph_env import keep_large_buffers
 from mechdeconv_ros.image_msgs import (
     camera_info_from_model, image_to_array, MalformedImageError, OutputImagePool,
     UnsupportedEncodingError)
@@ -958,29 +957,6 @@ def _text(value: Any) -> str:
     if isinstance(value, (list, tuple)):
         return json.dumps(value, default=float)
     return str(value)
-
-
-def keep_large_buffers() -> bool:
-    """
-    Stop glibc from returning multi-MB buffers to the kernel after every use.
-
-    Each frame and each rebuild allocates buffers of megabytes (messages, maps). By default
-    glibc serves those with mmap and unmaps them on free, so every reuse page-faults the
-    memory in again: measured, a 1080p map rebuild takes 11.5 ms median that way and 8.3 ms
-    with these settings. This is what ``MALLOC_MMAP_THRESHOLD_=67108864`` and
-    ``MALLOC_TRIM_THRESHOLD_=1073741824`` do, applied at run time (``mallopt``) so that
-    ``ros2 run`` gets it without an environment. No-op where glibc is not the C library.
-
-    :return: True when both settings were applied.
-    """
-    try:
-        libc = ctypes.CDLL(ctypes.util.find_library('c') or 'libc.so.6')
-        mallopt = libc.mallopt
-    except (OSError, AttributeError):
-        return False
-    m_trim_threshold, m_mmap_threshold = -1, -3     # glibc's malloc.h
-    return bool(mallopt(m_mmap_threshold, 64 * 1024 * 1024)) and \
-        bool(mallopt(m_trim_threshold, 1024 * 1024 * 1024))
 
 
 def main(args: list[str] | None = None) -> None:

@@ -43,10 +43,9 @@ import time
 from typing import Any, Callable, Sequence
 
 import cv2
+from mechdeconv_ros.graph_env import MALLOC_ENV
 import numpy as np
 
-#: The glibc settings of the Makefile: no per-message mmap/munmap of multi-MB image buffers.
-MALLOC_ENV = {'MALLOC_MMAP_THRESHOLD_': '67108864', 'MALLOC_TRIM_THRESHOLD_': '1073741824'}
 #: Seconds to wait for the first corrected frame after starting the processes.
 STARTUP_TIMEOUT_S = 30.0
 #: Seconds a child gets to exit after SIGINT before it is sent SIGTERM, then SIGKILL.
