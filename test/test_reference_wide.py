@@ -206,7 +206,7 @@ def test_whole_field_curve(key: str, record_property: Any) -> None:
 
 @pytest.mark.skipif(ANGLE_TRACER is None, reason=ANGLE_REASON)
 def test_fisheye_reaches_past_90_degrees() -> None:
-    """optiland and our trace both follow the fisheye's chief rays beyond 90 deg."""
+    """Both optiland and our trace follow the fisheye's chief rays beyond 90 deg."""
     lens = LENSES['fisheye_170']
     assert lens['optiland_reach_deg'] > 90.0
     angles = np.asarray(lens['curve']['field_angle_deg'])
