@@ -5,8 +5,9 @@ Exact meridional ray tracing of rotationally symmetric lenses, and their paraxia
 
 Pure numpy, no ROS. This is how mechdeconv_ros computes distortion (DESIGN.md section 2,
 "trace the chief ray"): the real chief ray from each object point is found by ray aiming and
-refracted exactly by Snell's law at every spherical surface; where it crosses the sensor is
-the real image height.
+refracted exactly by Snell's law at every surface (sphere, conic or even asphere: the
+geometry is in :mod:`mechdeconv_ros.surfaces`); where it crosses the sensor is the real image
+height.
 
 Conventions
 -----------
@@ -26,7 +27,9 @@ vertex (z' = z - z_v) a surface is c (y^2 + z'^2) - 2 z' = 0. The ray meets it a
     s = C / (B + sqrt(B^2 - c C)),   B = k_z - c (y k_y + z' k_z),   C = c (y^2 + z'^2) - 2 z'
 
 (the cancellation-free root on the vertex side; c = 0 gives the plane s = -z'/k_z). The
-unit surface normal there is N = (-c y, 1 - c z'). Refraction from index n to n' (vector
+unit surface normal there is N = (-c y, 1 - c z'). Conic and aspheric surfaces are met by
+Newton's method from the conic's root (:func:`surfaces.intersect`, the sphere above is its
+closed-form special case). Refraction from index n to n' (vector
 Snell law, mu = n/n'):
 
     sin_i = k x N,  cos_i = k . N,  cos_t = sqrt(1 - mu^2 sin_i^2),
@@ -79,6 +82,7 @@ from dataclasses import dataclass
 import math
 from typing import NamedTuple
 
+from mechdeconv_ros import surfaces
 import numpy as np
 
 #: |1/f| below this (1/mm) is treated as an afocal system.
@@ -111,23 +115,46 @@ def finite_number(what: str, value: object) -> float:
 @dataclass(frozen=True)
 class Surface:
     """
-    One spherical (or flat) refracting surface.
+    One refracting surface: spherical, flat, conic or even asphere.
 
     ``radius_mm`` is signed (> 0: centre of curvature on the image side, 0 = flat),
     ``thickness_mm`` the axial distance to the next surface (ignored for the last one),
-    ``refractive_index`` the index after the surface (1.0 = air) and ``semi_diameter_mm``
-    the clear semi-aperture (0 = unlimited). Values are checked by :class:`Prescription`.
+    ``refractive_index`` the index after the surface (1.0 = air), ``semi_diameter_mm``
+    the clear semi-aperture (0 = unlimited), ``conic`` the conic constant k and ``asphere``
+    the coefficients a4, a6, ..., a16 (up to seven, mm^(1-2j)); see :mod:`surfaces` for the
+    sag. The defaults (k = 0, no asphere) are the sphere. Values are checked by
+    :class:`Prescription`.
     """
 
     radius_mm: float
     thickness_mm: float
     refractive_index: float
     semi_diameter_mm: float = 0.0
+    conic: float = 0.0
+    asphere: tuple[float, ...] = ()
 
     @property
     def curvature_per_mm(self) -> float:
         """Return the curvature c = 1/r in 1/mm (0 for a flat surface)."""
         return 0.0 if self.radius_mm == 0 else 1.0 / self.radius_mm
+
+
+def _check_shape(i: int, surface: Surface, semi: float) -> None:
+    """Check the conic and asphere coefficients of surface ``i`` (semi-diameter ``semi``)."""
+    conic = finite_number(f'surface {i}: conic', surface.conic)
+    try:
+        terms = tuple(surface.asphere)
+    except TypeError:
+        raise ValueError(f'surface {i}: asphere must be a sequence of a4..a16') from None
+    if len(terms) > surfaces.ASPHERE_TERMS:
+        raise ValueError(f'surface {i}: {len(terms)} asphere coefficients, at most '
+                         f'{surfaces.ASPHERE_TERMS} (a4..a16)')
+    for j, a in enumerate(terms):
+        finite_number(f'surface {i}: asphere a{2 * j + 4}', a)
+    limit = surfaces.domain_limit_mm(surface)
+    if semi > 0 and semi > limit:
+        raise ValueError(f'surface {i}: conic {conic:g} leaves the sag undefined beyond '
+                         f'r = {limit:.4g} mm, inside the semi-diameter {semi:g} mm')
 
 
 @dataclass(frozen=True)
@@ -172,6 +199,7 @@ class Prescription:
             semi = finite_number(f'surface {i}: semi-diameter', surface.semi_diameter_mm)
             if semi < 0:
                 raise ValueError(f'surface {i}: semi-diameter {semi:g} mm < 0')
+            _check_shape(i, surface, semi)
         finite_number('stop position', self.stop_z_mm)
         index = finite_number('object-space refractive index', self.object_index)
         if index < 1:
@@ -335,10 +363,10 @@ def image_plane(prescription: Prescription, object_distance_mm: float) -> tuple[
 def refract(dy: np.ndarray, dz: np.ndarray, normal_y: np.ndarray, normal_z: np.ndarray,
             n_before: float, n_after: float) -> tuple[np.ndarray, np.ndarray]:
     """
-    Refract unit directions at a surface with unit normals (vector Snell law).
+    Refract unit meridional directions at a surface with unit normals (vector Snell law).
 
     The normal points into the second medium (its z component is > 0). The tangential
-    component n sin(i) = n (k x N) is preserved exactly.
+    component n sin(i) = n (k x N) is preserved exactly. See :func:`surfaces.refract`.
 
     :param dy: direction y components.
     :param dz: direction z components.
@@ -349,14 +377,8 @@ def refract(dy: np.ndarray, dz: np.ndarray, normal_y: np.ndarray, normal_z: np.n
     :return: refracted (dy, dz); NaN where the ray is totally internally reflected or hits the
         surface from behind (k . N <= 0).
     """
-    with np.errstate(**_ERRSTATE):
-        mu = n_before / n_after
-        sin_i = dy * normal_z - dz * normal_y
-        cos_i = dy * normal_y + dz * normal_z
-        cos_t = np.sqrt(1.0 - mu * mu * sin_i * sin_i)   # NaN on TIR
-        cos_t = np.where(cos_i > 0, cos_t, np.nan)
-        g = cos_t - mu * cos_i
-        return mu * dy + g * normal_y, mu * dz + g * normal_z
+    _, ky, kz = surfaces.refract(0.0, dy, dz, 0.0, normal_y, normal_z, n_before, n_after)
+    return ky, kz
 
 
 def _nan_where(bad: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -384,22 +406,17 @@ def trace_surfaces(prescription: Prescription, rays: Rays, first: int = 0,
     with np.errstate(**_ERRSTATE):
         for i in range(first, count):
             surface = prescription.surfaces[i]
-            c = surface.curvature_per_mm
             z_local = z - z_vertices[i]
-            b = dz - c * (y * dy + z_local * dz)
-            cc = c * (y * y + z_local * z_local) - 2.0 * z_local
-            s = cc / (b + np.sqrt(b * b - c * cc))   # NaN when the sphere is missed
+            s, _, normal_y, normal_z, bad = surfaces.intersect(
+                surface, 0.0, y, z_local, 0.0, dy, dz)
             y = y + s * dy
             z_local = z_local + s * dz
-            normal_y = -c * y
-            normal_z = 1.0 - c * z_local
-            bad = ~(normal_z > 0) | ~np.isfinite(s)
             if i > first:
                 bad |= s < -BACKWARD_TOLERANCE_MM
             if surface.semi_diameter_mm > 0:
                 bad |= ~(np.abs(y) <= surface.semi_diameter_mm)
-            dy, dz = refract(dy, dz, normal_y, normal_z, prescription.index_before(i),
-                             surface.refractive_index)
+            _, dy, dz = surfaces.refract(0.0, dy, dz, 0.0, normal_y, normal_z,
+                                         prescription.index_before(i), surface.refractive_index)
             bad |= ~(dz > 0)
             y, z, dy, dz = _nan_where(bad, y, z_local + z_vertices[i], dy, dz)
     return Rays(y, z, dy, dz)
