@@ -538,13 +538,13 @@ def _aim(problem: _ChiefRayProblem, field: np.ndarray, start: np.ndarray | None 
     """
     Return the aiming offsets h of the chief rays (NaN where aiming failed).
 
-    Newton on y_stop(h) from the paraxial chief ray (or from ``start``), at most
-    ``iterations`` steps of at most ``halvings`` halvings each. A step is accepted when its ray exists,
-    keeps the paraxial sign of dy_stop/dh (the branch of solutions that starts on the axis)
-    and reduces |y_stop|; otherwise it is halved, or, past a fold of y_stop(h), shortened to
-    the root of the local quadratic model. A ray fails (NaN) when that model shows no root
-    ahead, after STALL_ITERATIONS iterations that each reduce |y_stop| by less than 10 %, or
-    when no step can be accepted: there is no real chief ray (the end of the valid field).
+    Newton on y_stop(h) from the paraxial chief ray (or from ``start``), at most ``iterations``
+    steps of at most ``halvings`` halvings each. A step is accepted when its ray exists, keeps
+    the paraxial sign of dy_stop/dh (the branch of solutions that starts on the axis) and
+    reduces |y_stop|; otherwise it is halved, or, past a fold of y_stop(h), shortened to the
+    root of the local quadratic model. A ray fails (NaN) when that model shows no root ahead,
+    after STALL_ITERATIONS iterations that each reduce |y_stop| by less than 10 %, or when no
+    step can be accepted: there is no real chief ray (the end of the valid field).
     """
     tolerance = STOP_TOLERANCE_MM * np.minimum(1.0, problem.field_size(field) + 1e-6)
     height = problem.paraxial_height(field)
