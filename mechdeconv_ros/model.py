@@ -42,7 +42,8 @@ from mechdeconv_ros.optics import biconvex_for_focal_length, propagate_sigma, th
 from mechdeconv_ros.params import (
     ASPHERE_POWERS, check_values, INTERPOLATIONS, MAX_FRAME_PIXELS, ParamValue)
 from mechdeconv_ros.raytrace import (
-    image_plane, paraxial, Prescription, Surface, trace_chief_rays, vertex_z)
+    image_plane, paraxial, Prescription, Surface, trace_chief_rays, trace_field_angles,
+    vertex_z)
 from mechdeconv_ros.surfaces import domain_limit_mm
 import numpy as np
 import numpy.typing as npt
@@ -52,6 +53,14 @@ FloatArray = npt.NDArray[np.float64]
 
 #: Samples of the radial map (DESIGN: at least 1024 from 0 to past the output corner).
 CURVE_SAMPLES = 2048
+#: Largest field angle a pinhole (rectilinear) output shows: its radial magnification
+#: 1/cos^2(theta) grows without bound towards 90 deg (11x at 73, 130x at 85 deg).
+PINHOLE_MAX_FIELD_DEG = 85.0
+#: Largest field angle traced for a scene at infinity (a fisheye sees behind its front
+#: vertex; 180 deg would be the axis behind the camera), and for a finite scene plane (whose
+#: height l tan(theta) is infinite at 90 deg).
+MAX_FIELD_DEG_INFINITE = 179.0
+MAX_FIELD_DEG_FINITE = 89.5
 #: Plumb_bob fits worse than this (px RMS) switch to rational_polynomial.
 PLUMB_BOB_MAX_RMS_PX = 0.1
 #: OpenCV interpolation flags by the names ``output.interpolation`` accepts.
@@ -84,12 +93,17 @@ class RadialMap:
     """
     The traced radial map ``rho_real = R(rho_ideal)`` on the sensor, in mm.
 
-    ``ideal_mm`` is uniformly spaced from 0; ``real_mm`` is strictly increasing. Beyond
-    ``ideal_mm[-1]`` (``valid_ideal_mm``) the field is not valid.
+    ``ideal_mm`` is uniformly spaced from 0: the ideal height in the map's projection, v tan
+    theta (pinhole) or v theta (equidistant); ``real_mm`` is strictly increasing and
+    ``field_angle_rad`` holds the object-space chief-ray angle theta of each sample. Beyond
+    ``ideal_mm[-1]`` (``valid_ideal_mm``) the field is not valid; ``folded`` says that it ends
+    because the real height stops increasing (a fold), not because a ray fails.
     """
 
     ideal_mm: FloatArray
     real_mm: FloatArray
+    field_angle_rad: FloatArray | None = None
+    folded: bool = False
 
     @property
     def valid_ideal_mm(self) -> float:
@@ -111,6 +125,22 @@ class RadialMap:
         ideal_mm = np.asarray(ideal_mm, dtype=np.float64)
         out = np.interp(ideal_mm, self.ideal_mm, self.real_mm)
         return np.where(ideal_mm <= self.valid_ideal_mm, out, np.nan)
+
+    @property
+    def max_field_angle_rad(self) -> float:
+        """Return the field angle of the last valid sample."""
+        return float(self.field_angle_rad[-1]) if self.field_angle_rad is not None else math.nan
+
+    def angle_from_real(self, real_mm: FloatArray) -> FloatArray:
+        """
+        Return the field angle theta (rad) imaged at real radii; NaN beyond the valid field.
+
+        :param real_mm: real radii, mm, any shape.
+        :return: theta in rad.
+        """
+        real_mm = np.asarray(real_mm, dtype=np.float64)
+        out = np.interp(real_mm, self.real_mm, self.field_angle_rad)
+        return np.where(real_mm <= self.valid_real_mm, out, np.nan)
 
     def ideal_from_real(self, real_mm: FloatArray) -> FloatArray:
         """
@@ -150,6 +180,8 @@ class LensModel:
     fit_rms_px: float
     max_displacement_px: float
     interpolation: int
+    projection: str = 'pinhole'
+    field_curve: RadialMap | None = None
     _summary_cache: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -212,9 +244,10 @@ class LensModel:
         """
         Return every derived quantity as a JSON-ready dict (infinite distances are ``None``).
 
-        :return: the summary with K, D, P and a subsampled distortion curve.
+        :return: the summary with K, D, P and the distortion curve over the whole field the
+            lens passes (``field_angle_deg``, ``ideal_height_mm`` = v tan(theta), None from
+            90 deg, ``real_height_mm``), at most 257 samples.
         """
-        step = max(1, len(self.curve.ideal_mm) // 256)
         out = dict(self.summary)
         out.update({
             'width_px': self.width, 'height_px': self.height,
@@ -224,11 +257,19 @@ class LensModel:
             'K_new': self.K_new.round(10).tolist(), 'P': self.P.round(10).tolist(),
             'fit_rms_px': self.fit_rms_px,
             'max_displacement_px': self.max_displacement_px,
-            'distortion_curve': {
-                'ideal_height_mm': self.curve.ideal_mm[::step].tolist(),
-                'real_height_mm': self.curve.real_mm[::step].tolist(),
-            },
         })
+        field = out.pop('_field_curve')
+        theta, real = field['theta_rad'], field['real_mm']
+        pick = np.unique(np.linspace(0, theta.size - 1, min(theta.size, 257)).round()
+                         .astype(int))
+        with np.errstate(invalid='ignore', over='ignore'):
+            ideal = np.where(theta[pick] < 0.5 * math.pi,
+                             self.image_distance_mm * np.tan(theta[pick]), np.nan)
+        out['distortion_curve'] = {
+            'field_angle_deg': np.degrees(theta[pick]).tolist(),
+            'ideal_height_mm': ideal.tolist(),
+            'real_height_mm': real[pick].tolist(),
+        }
         return _json_safe(out)
 
 
@@ -386,15 +427,36 @@ def _image_size(values: Mapping[str, Any], width: int, height: int) -> tuple[int
 
 
 def _trace_curve(prescription: Prescription, distance: float, sensor_z: float, v: float,
-                 ideal_max_mm: float, samples: int) -> RadialMap:
-    """Trace ``samples`` chief rays from 0 to ``ideal_max_mm`` and keep the valid prefix."""
+                 ideal_max_mm: float, samples: int, projection: str = 'pinhole') -> RadialMap:
+    """
+    Trace ``samples`` chief rays from 0 to ``ideal_max_mm`` and keep the valid prefix.
+
+    The ideal heights are uniform in the projection: v tan(theta) for ``pinhole``, v theta for
+    ``equidistant`` (which reaches past 90 deg for a scene at infinity).
+    """
     ideal = np.linspace(0.0, ideal_max_mm, samples)
-    real = -trace_chief_rays(prescription, distance, sensor_z, ideal / v)
+    if projection == 'pinhole':
+        real = -trace_chief_rays(prescription, distance, sensor_z, ideal / v)
+        theta = np.arctan(ideal / v)
+    else:
+        theta = ideal / v
+        real = -trace_field_angles(prescription, distance, sensor_z, theta)
     good = np.isfinite(real)
-    good[1:] &= np.diff(real) > 0.0
+    rising = np.ones_like(good)
+    rising[1:] = np.diff(real) > 0.0
+    good &= rising
     # The valid field is the prefix up to the first failed ray or the first non-increase.
     end = int(np.argmin(good)) if not good.all() else samples
-    return RadialMap(ideal[:end], real[:end])
+    folded = end < samples and bool(np.isfinite(real[end])) and not rising[end]
+    return RadialMap(ideal[:end], real[:end], theta[:end], folded)
+
+
+def _projected(theta: FloatArray, projection: str) -> FloatArray:
+    """Return the normalised ideal radius of field angles: tan(theta) or theta."""
+    if projection == 'pinhole':
+        with np.errstate(invalid='ignore'):
+            return np.tan(np.minimum(theta, math.radians(PINHOLE_MAX_FIELD_DEG)))
+    return np.asarray(theta, dtype=np.float64)
 
 
 def _boundary_points(w: int, h: int, per_side: int = 64) -> FloatArray:
@@ -409,11 +471,12 @@ def _boundary_points(w: int, h: int, per_side: int = 64) -> FloatArray:
     ])
 
 
-def _fit_equivalent_d(curve: RadialMap, v: float, limit_ideal_mm: float,
+def _fit_equivalent_d(curve: RadialMap, v: float, limit_theta: float,
                       pixel_mm: float) -> tuple[tuple[float, ...], str, float]:
-    """Fit plumb_bob (or rational_polynomial) to the curve up to ``limit_ideal_mm``."""
-    keep = (curve.ideal_mm > 0.0) & (curve.ideal_mm <= limit_ideal_mm)
-    r_u = curve.ideal_mm[keep] / v
+    """Fit plumb_bob (or rational_polynomial) to the curve up to the angle ``limit_theta``."""
+    theta = curve.field_angle_rad
+    keep = (theta > 0.0) & (theta <= limit_theta) & (theta < 0.5 * math.pi)
+    r_u = np.tan(theta[keep])
     r_d = curve.real_mm[keep] / v
     if r_u.size < 8:
         return (0.0,) * 5, 'plumb_bob', 0.0
@@ -503,14 +566,20 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0) -> L
     fx, fy = v / px, v / py
     K = np.array([[fx, 0.0, (w - 1) / 2.0], [0.0, fy, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
 
-    # Pass 1: trace far enough to cover the raw image (edge, not pixel centre) and find K_new.
+    projection = str(vals['output.projection'])
+    cap = _field_cap_rad(distance)
+
+    # Pass 1: trace the field by angle (theta uniform) far enough to cover the raw image (its
+    # edge, not the pixel centre), or to the end of the field the lens passes.
     edge_real = math.hypot(w / 2.0 * px, h / 2.0 * py)
-    ideal_max = 1.5 * edge_real
+    theta_max = min(cap, 1.5 * edge_real / v)
     for _ in range(12):
-        coarse = _trace_curve(prescription, distance, sensor_z, v, ideal_max, 1024)
-        if coarse.ideal_mm.size < 1024 or coarse.valid_real_mm >= 1.05 * edge_real:
+        coarse = _trace_curve(prescription, distance, sensor_z, v, theta_max * v, 1024,
+                              'equidistant')
+        if (coarse.ideal_mm.size < 1024 or coarse.valid_real_mm >= 1.05 * edge_real
+                or theta_max >= cap):
             break
-        ideal_max *= 2.0
+        theta_max = min(cap, 2.0 * theta_max)
     if coarse.ideal_mm.size == 0:
         raise ModelError(_lens_param(vals), 'not even the axial ray passes through this lens: '
                                             'a surface misses it or reflects it totally')
@@ -525,21 +594,23 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0) -> L
     bx = (boundary[:, 0] - K[0, 2]) * px
     by = (boundary[:, 1] - K[1, 2]) * py
     b_real = np.hypot(bx, by)
-    b_ideal = coarse.ideal_from_real(np.minimum(b_real, coarse.valid_real_mm))
-    ratio = b_ideal / b_real / v
+    b_theta = coarse.angle_from_real(np.minimum(b_real, coarse.valid_real_mm))
+    ratio = _projected(b_theta, projection) / b_real
     boundary_ideal = np.stack([bx * ratio, by * ratio], axis=1)
-    disk = coarse.valid_ideal_mm / v
+    disk = float(_projected(np.array(coarse.max_field_angle_rad), projection))
     k = _scale_k(boundary_ideal, disk, ow / 2.0, oh / 2.0, fx, fy, float(vals['output.alpha']))
     K_new = np.array([[k * fx, 0.0, (ow - 1) / 2.0], [0.0, k * fy, (oh - 1) / 2.0],
                       [0.0, 0.0, 1.0]])
 
-    # Pass 2: the dense curve from 0 to just past the output corner (and the raw image edge).
+    # Pass 2: the dense curve in the output projection from 0 to just past the output corner
+    # (and the raw image edge).
     out_corner = math.hypot(ow / 2.0 / (k * fx), oh / 2.0 / (k * fy)) * v
-    raw_corner_ideal = float(np.nanmax(b_ideal))
-    reach = min(1.02 * max(out_corner, raw_corner_ideal), coarse.valid_ideal_mm * 1.001)
-    curve = _trace_curve(prescription, distance, sensor_z, v, reach, CURVE_SAMPLES)
+    raw_corner_ideal = float(np.nanmax(ratio * b_real)) * v
+    reach = min(1.02 * max(out_corner, raw_corner_ideal), disk * v * 1.001)
+    curve = _trace_curve(prescription, distance, sensor_z, v, reach, CURVE_SAMPLES, projection)
 
-    D, dist_model, rms = _fit_equivalent_d(curve, v, raw_corner_ideal, min(px, py))
+    raw_corner_theta = float(np.nanmax(b_theta))
+    D, dist_model, rms = _fit_equivalent_d(coarse, v, raw_corner_theta, min(px, py))
     disp = (boundary_ideal * v - np.stack([bx, by], axis=1)) / np.array([px, py])
     max_disp = float(np.nanmax(np.hypot(disp[:, 0], disp[:, 1])))
 
@@ -548,8 +619,15 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0) -> L
         out_height=oh, pixel_mm=(px, py), focal_length_mm=f, image_distance_mm=v, curve=curve,
         K=K, K_new=K_new, D=D, distortion_model=dist_model, fit_rms_px=rms,
         max_displacement_px=max_disp,
-        interpolation=CV_INTERPOLATION[str(vals['output.interpolation'])])
+        interpolation=CV_INTERPOLATION[str(vals['output.interpolation'])],
+        projection=projection, field_curve=coarse)
     return model
+
+
+def _field_cap_rad(distance: float) -> float:
+    """Return the largest field angle traced for a scene at ``distance`` (rad)."""
+    return math.radians(MAX_FIELD_DEG_INFINITE if math.isinf(distance)
+                        else MAX_FIELD_DEG_FINITE)
 
 
 def _lens_param(values: Mapping[str, Any]) -> str:
@@ -647,6 +725,11 @@ def _summary(model: LensModel) -> dict[str, Any]:
     if not near <= distance <= far:
         warnings.append(f'scene distance {distance:g} mm is outside the depth of field '
                         f'[{near:.4g}, {far:.4g}] mm of the focus distance {focus:g} mm')
+    field = _full_field(model)
+    if field['folded']:
+        warnings.append(f"the real image height folds back at {field['max_field_angle_deg']:.4g} "
+                        f"deg (r = {field['image_circle_radius_mm']:.4g} mm): the valid field "
+                        'ends before the fold')
     if model.curve.valid_real_mm < edge_real:
         warnings.append(f'the valid field ends at {model.curve.valid_real_mm:.4g} mm, inside '
                         f'the sensor half-diagonal {edge_real:.4g} mm: corners stay black')
@@ -679,8 +762,91 @@ def _summary(model: LensModel) -> dict[str, Any]:
         'focus_distance_mm': _finite_or_none(focus),
         'depth_of_field_mm': {'near': near, 'far': _finite_or_none(far)},
         'valid_field_mm': model.curve.valid_real_mm,
+        'projection': model.projection,
+        'max_field_angle_deg': field['max_field_angle_deg'],
+        'covered_field': _covered_field(model, field),
+        '_field_curve': field,
         'corner_sigma_px': corner_sigma,
         'warnings': warnings,
+    }
+
+
+#: Samples of the whole-field trace (the lens's own limit, for the report).
+FULL_FIELD_SAMPLES = 256
+
+
+def _full_field(model: LensModel) -> dict[str, Any]:
+    """
+    Return the chief-ray curve over the whole field the lens passes, to its limit.
+
+    When the model's angle-uniform trace (``field_curve``) already ends inside its range (a
+    failed ray or a fold), that is the limit. Otherwise the field is traced from 0 to the cap
+    (179 deg at infinity, 89.5 deg for a finite scene), and the last interval refined 64
+    times, so the limit is known to about 0.01 deg.
+    """
+    curve = model.field_curve
+    theta, real, folded = curve.field_angle_rad, curve.real_mm, curve.folded
+    distance = _scene_distance(model.values)
+    cap = _field_cap_rad(distance)
+    if curve.ideal_mm.size == 1024 and curve.max_field_angle_rad < cap:
+        sensor_z, _ = image_plane(model.prescription, distance)
+        grid = np.linspace(0.0, cap, FULL_FIELD_SAMPLES)
+        traced = _trace_angles(model, sensor_z, grid)
+        if traced.ideal_mm.size < FULL_FIELD_SAMPLES:
+            end = traced.ideal_mm.size
+            fine = np.concatenate((np.linspace(0.0, grid[end - 1], 64),
+                                   np.linspace(grid[end - 1], grid[end], 66)[1:]))
+            traced = _trace_angles(model, sensor_z, fine)
+        theta, real, folded = traced.field_angle_rad, traced.real_mm, traced.folded
+    return {'theta_rad': theta, 'real_mm': real, 'folded': folded,
+            'max_field_angle_deg': math.degrees(float(theta[-1])),
+            'image_circle_radius_mm': float(real[-1])}
+
+
+def _trace_angles(model: LensModel, sensor_z: float, theta: FloatArray) -> RadialMap:
+    """Trace the chief rays of the field angles ``theta`` (increasing); keep the valid prefix."""
+    real = -trace_field_angles(model.prescription, _scene_distance(model.values), sensor_z,
+                               theta)
+    good = np.isfinite(real)
+    rising = np.ones_like(good)
+    rising[1:] = np.diff(real) > 0.0
+    good &= rising
+    end = int(np.argmin(good)) if not good.all() else theta.size
+    folded = end < theta.size and bool(np.isfinite(real[end])) and not rising[end]
+    return RadialMap(theta[:end] * model.image_distance_mm, real[:end], theta[:end], folded)
+
+
+def _covered_field(model: LensModel, field: Mapping[str, Any]) -> dict[str, Any]:
+    """Return the field the raw image and the corrected image cover, in degrees."""
+    theta, real = field['theta_rad'], field['real_mm']
+    circle = field['image_circle_radius_mm']
+
+    def angle(radius_mm: float) -> float | None:
+        if not radius_mm <= circle:
+            return None
+        return math.degrees(float(np.interp(radius_mm, real, theta)))
+
+    half_w = model.width / 2.0 * model.pixel_mm[0]
+    half_h = model.height / 2.0 * model.pixel_mm[1]
+    corner = math.hypot(half_w, half_h)
+    ideal = math.hypot(model.out_width / 2.0 / model.K_new[0, 0],
+                       model.out_height / 2.0 / model.K_new[1, 1]) * model.image_distance_mm
+    curve = model.curve
+    out_corner = (math.degrees(float(np.interp(ideal, curve.ideal_mm, curve.field_angle_rad)))
+                  if ideal <= curve.valid_ideal_mm else None)
+
+    def full(half: float | None) -> float | None:
+        return None if half is None else 2.0 * half
+
+    return {
+        'max_field_angle_deg': field['max_field_angle_deg'],
+        'image_circle_radius_mm': circle,
+        'corners_covered': corner <= circle,
+        'corner_field_angle_deg': angle(corner),
+        'horizontal_deg': full(angle(half_w)),
+        'vertical_deg': full(angle(half_h)),
+        'diagonal_deg': full(angle(corner)),
+        'output_corner_field_angle_deg': out_corner,
     }
 
 
@@ -696,15 +862,17 @@ def _corner_sigma_px(model: LensModel, vals: Mapping[str, Any], nominal: Mapping
     corner = np.array([[model.width - 1.0, model.height - 1.0]])
     x_mm = (corner[0, 0] - model.K[0, 2]) * model.pixel_mm[0]
     y_mm = (corner[0, 1] - model.K[1, 2]) * model.pixel_mm[1]
-    ideal = float(model.curve.ideal_from_real(np.array(math.hypot(x_mm, y_mm))))
-    if not math.isfinite(ideal):
+    theta = float(model.field_curve.angle_from_real(np.array(math.hypot(x_mm, y_mm))))
+    if not math.isfinite(theta):
         return math.nan
-    tan_field = np.array([ideal / model.image_distance_mm])
+    # A ladder of angles up to the corner: a wide-angle lens's chief ray is aimed by
+    # continuation from the smaller angles (raytrace._aim_continued).
+    ladder = theta * np.array([0.25, 0.5, 0.75, 1.0])
 
     def height(p: Mapping[str, float]) -> float:
         lens = make_prescription(_with(vals, p))
         z, _ = image_plane(lens, distance)
-        return float(-trace_chief_rays(lens, distance, z, tan_field)[0])
+        return float(-trace_field_angles(lens, distance, z, ladder)[-1])
 
     return _sigma_or_nan(height, nominal, sigmas) / min(model.pixel_mm)
 
