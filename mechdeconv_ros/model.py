@@ -21,11 +21,21 @@ The model (Lim & Furukawa 2008, with the distortion traced instead of approximat
    (``alpha = 0``) and the one that keeps every source pixel (``alpha = 1``), as OpenCV's
    getOptimalNewCameraMatrix does (but with one scale for both axes, so the pixel aspect is
    kept).
-5. The equivalent calibration fits OpenCV/ROS radial coefficients to the traced curve in
-   normalised coordinates ``r_u = rho_ideal / v``, ``r_d = rho_real / v``:
-   plumb_bob ``r_d = r_u (1 + k1 r_u^2 + k2 r_u^4 + k3 r_u^6)``, or rational_polynomial
-   ``r_d (1 + k4 r_u^2 + k5 r_u^4 + k6 r_u^6) = r_u (1 + k1 r_u^2 + k2 r_u^4 + k3 r_u^6)``
-   when plumb_bob misses by more than 0.1 px RMS. Both are linear least squares.
+5. The equivalent calibration (``camera_info``'s D) is one of the models ROS consumers read,
+   fitted to the traced field: plumb_bob ``r_d = r_u (1 + k1 r_u^2 + k2 r_u^4 + k3 r_u^6)``,
+   rational_polynomial ``r_d (1 + k4 r_u^2 + k5 r_u^4 + k6 r_u^6) = r_u (1 + k1 r_u^2 +
+   k2 r_u^4 + k3 r_u^6)`` (``r_u = tan(theta)``) or equidistant (Kannala-Brandt, cv2.fisheye)
+   ``r_d = theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8)``, with
+   ``r_d = rho_real / v``. Each is fitted by least squares refined towards the minimax, then
+   measured by its LARGEST displacement over the raw image (where a consumer's rectification
+   map puts each raw pixel against the trace); the first in that order within 0.05 px is
+   published, else the one with the smallest error (``equivalent_max_error_px``). Pinhole
+   models cannot describe a field of 90 deg or more.
+6. The field is traced by angle: the chief-ray angle theta of every sample is kept, and
+   ``output.projection`` makes the corrected image a pinhole (``rho_ideal = v tan(theta)``, at
+   most 85 deg) or an ideal fisheye (``equidistant``, ``rho_ideal = v theta``, any field, past
+   90 deg for a scene at infinity). Where the real height folds back or a ray fails the valid
+   field ends (a fold is reported as a warning).
 
 Pixel coordinates follow OpenCV and ROS (REP-103 optical frame): x right, y down, origin at the
 centre of the top-left pixel.
@@ -61,8 +71,6 @@ PINHOLE_MAX_FIELD_DEG = 85.0
 #: height l tan(theta) is infinite at 90 deg).
 MAX_FIELD_DEG_INFINITE = 179.0
 MAX_FIELD_DEG_FINITE = 89.5
-#: Plumb_bob fits worse than this (px RMS) switch to rational_polynomial.
-PLUMB_BOB_MAX_RMS_PX = 0.1
 #: OpenCV interpolation flags by the names ``output.interpolation`` accepts.
 CV_INTERPOLATION = {'nearest': 0, 'linear': 1, 'cubic': 2, 'lanczos4': 4}
 assert tuple(CV_INTERPOLATION) == INTERPOLATIONS
@@ -179,6 +187,8 @@ class LensModel:
     distortion_model: str
     fit_rms_px: float
     max_displacement_px: float
+    equivalent_max_error_px: float
+    equivalent_fits: tuple[EquivalentFit, ...]
     interpolation: int
     projection: str = 'pinhole'
     field_curve: RadialMap | None = None
@@ -256,6 +266,10 @@ class LensModel:
             'distortion_model': self.distortion_model,
             'K_new': self.K_new.round(10).tolist(), 'P': self.P.round(10).tolist(),
             'fit_rms_px': self.fit_rms_px,
+            'equivalent_max_error_px': self.equivalent_max_error_px,
+            'equivalent_models': {fit.distortion_model: {'max_error_px': fit.max_error_px,
+                                                         'rms_error_px': fit.rms_error_px}
+                                  for fit in self.equivalent_fits},
             'max_displacement_px': self.max_displacement_px,
         })
         field = out.pop('_field_curve')
@@ -471,35 +485,189 @@ def _boundary_points(w: int, h: int, per_side: int = 64) -> FloatArray:
     ])
 
 
-def _fit_equivalent_d(curve: RadialMap, v: float, limit_theta: float,
-                      pixel_mm: float) -> tuple[tuple[float, ...], str, float]:
-    """Fit plumb_bob (or rational_polynomial) to the curve up to the angle ``limit_theta``."""
-    theta = curve.field_angle_rad
-    keep = (theta > 0.0) & (theta <= limit_theta) & (theta < 0.5 * math.pi)
-    r_u = np.tan(theta[keep])
-    r_d = curve.real_mm[keep] / v
-    if r_u.size < 8:
-        return (0.0,) * 5, 'plumb_bob', 0.0
-    to_px = v / pixel_mm
-    r2 = r_u * r_u
-    powers = np.stack([r2, r2 * r2, r2 * r2 * r2], axis=1)
-    # plumb_bob: r_d - r_u = r_u (k1 r^2 + k2 r^4 + k3 r^6), residuals scaled to pixels.
-    a = r_u[:, None] * powers
-    k, *_ = np.linalg.lstsq(a * to_px, (r_d - r_u) * to_px, rcond=None)
-    rms = float(np.sqrt(np.mean(((a @ k) - (r_d - r_u)) ** 2)) * to_px)
-    plumb = (float(k[0]), float(k[1]), 0.0, 0.0, float(k[2]))
-    if rms <= PLUMB_BOB_MAX_RMS_PX:
-        return plumb, 'plumb_bob', rms
-    # rational: r_d - r_u = r_u (k1 r^2 + k2 r^4 + k3 r^6) - r_d (k4 r^2 + k5 r^4 + k6 r^6).
-    b = np.hstack([r_u[:, None] * powers, -r_d[:, None] * powers])
-    c, *_ = np.linalg.lstsq(b * to_px, (r_d - r_u) * to_px, rcond=None)
-    num = r_u * (1.0 + powers @ c[:3])
-    den = 1.0 + powers @ c[3:]
-    rational_rms = float(np.sqrt(np.mean((num / den - r_d) ** 2)) * to_px)
-    if not rational_rms < rms:
-        return plumb, 'plumb_bob', rms
-    return ((float(c[0]), float(c[1]), 0.0, 0.0, float(c[2]),
-             float(c[3]), float(c[4]), float(c[5])), 'rational_polynomial', rational_rms)
+#: The equivalent calibration is the simplest model whose largest displacement error over
+#: the raw image is at most this (px); when none reaches it, the one with the smallest.
+EQUIVALENT_MAX_ERROR_PX = 0.05
+#: Consumer models in order of preference: the most widely read first (plumb_bob and
+#: rational_polynomial are read by every ROS consumer, equidistant by cv2.fisheye-based
+#: ones: image_geometry C++, Isaac ROS; ROS's Python image_geometry has no fisheye support).
+EQUIVALENT_MODELS = ('plumb_bob', 'rational_polynomial', 'equidistant')
+#: Samples of the fit and reweighting passes of the minimax (Lawson) refinement.
+FIT_SAMPLES = 256
+LAWSON_PASSES = 12
+
+
+@dataclass(frozen=True)
+class EquivalentFit:
+    """One fitted consumer model: coefficients and its errors over the raw image (px)."""
+
+    distortion_model: str
+    D: tuple[float, ...]
+    max_error_px: float
+    rms_error_px: float
+
+
+def equivalent_radius(distortion_model: str, D: tuple[float, ...] | FloatArray,
+                      theta: FloatArray) -> FloatArray:
+    """
+    Return the distorted normalised radius a consumer model gives a field angle.
+
+    plumb_bob: r = t (1 + k1 t^2 + k2 t^4 + k3 t^6), t = tan(theta); rational_polynomial:
+    r = t (1 + k1 t^2 + k2 t^4 + k3 t^6) / (1 + k4 t^2 + k5 t^4 + k6 t^6); equidistant
+    (Kannala-Brandt, as cv2.fisheye): r = theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 +
+    k4 theta^8). The pinhole models are NaN from 90 deg.
+
+    :param distortion_model: one of :data:`EQUIVALENT_MODELS`.
+    :param D: the coefficients in camera_info order.
+    :param theta: field angles, rad.
+    :return: radii in normalised (x/f) units.
+    """
+    theta = np.asarray(theta, dtype=np.float64)
+    d = [float(x) for x in D]
+    if distortion_model == 'equidistant':
+        t2 = theta * theta
+        return theta * (1.0 + t2 * (d[0] + t2 * (d[1] + t2 * (d[2] + t2 * d[3]))))
+    with np.errstate(invalid='ignore', over='ignore'):
+        t = np.where(theta < 0.5 * math.pi, np.tan(theta), np.nan)
+        r2 = t * t
+        num = 1.0 + r2 * (d[0] + r2 * (d[1] + r2 * d[4]))
+        if distortion_model == 'rational_polynomial':
+            num = num / (1.0 + r2 * (d[5] + r2 * (d[6] + r2 * d[7])))
+        return t * num
+
+
+def _raw_probe_points(width: int, height: int) -> FloatArray:
+    """Return the raw pixels the consumer error is measured on: edges, corners and a grid."""
+    xs = np.linspace(-0.5, width - 0.5, 41)
+    ys = np.linspace(-0.5, height - 0.5, 31)
+    grid = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+    return np.concatenate([_boundary_points(width, height), grid])
+
+
+def fit_equivalent(field: RadialMap, v: float, K: FloatArray, width: int,
+                   height: int) -> list[EquivalentFit]:
+    """
+    Fit every consumer model to the traced field and measure it over the raw image.
+
+    The fit is least squares in pixels on FIT_SAMPLES field angles up to the raw image corner
+    (or the end of the field), refined towards the minimax by Lawson's reweighting; the error
+    of a model at a raw pixel is the distance (px) between that pixel and where the model
+    projects the pixel's true (traced) direction, which is what a consumer's rectification map
+    (cv2.initUndistortRectifyMap, cv2.fisheye.initUndistortRectifyMap) is off by there.
+    Raw pixels outside the image circle carry no direction and are skipped.
+
+    :param field: the field traced by angle (``LensModel.field_curve``).
+    :param v: image distance, mm (normalised radius = real / v).
+    :param K: raw camera matrix.
+    :param width: raw width, px.
+    :param height: raw height, px.
+    :return: one :class:`EquivalentFit` per model in :data:`EQUIVALENT_MODELS` order.
+    """
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    points = _raw_probe_points(width, height)
+    xn, yn = (points[:, 0] - cx) / fx, (points[:, 1] - cy) / fy
+    rn = np.hypot(xn, yn)
+    theta_p = field.angle_from_real(rn * v)
+    inside = np.isfinite(theta_p)
+    xn, yn, rn, theta_p = xn[inside], yn[inside], rn[inside], theta_p[inside]
+    # Pixels per unit of normalised radius along each probe's direction.
+    with np.errstate(invalid='ignore', divide='ignore'):
+        gain = np.where(rn > 0, np.hypot(xn * fx, yn * fy) / rn, max(fx, fy))
+    limit = float(np.max(theta_p)) if theta_p.size else 0.0
+    theta = np.linspace(0.0, limit, FIT_SAMPLES + 1)[1:]
+    target = np.interp(theta, field.field_angle_rad, field.real_mm) / v
+    scale = max(fx, fy)
+    fits = []
+    for name in EQUIVALENT_MODELS:
+        coefficients = _fit_model(name, theta, target, scale)
+        if coefficients is None and name == 'rational_polynomial' and fits[0].D != _zero_d(
+                'plumb_bob') and math.isfinite(fits[0].max_error_px):
+            # A degenerate rational fit (small fields): plumb_bob is its special case.
+            coefficients = fits[0].D + (0.0, 0.0, 0.0)
+        if coefficients is None:
+            fits.append(EquivalentFit(name, _zero_d(name), math.inf, math.inf))
+            continue
+        error = np.abs(equivalent_radius(name, coefficients, theta_p) - rn) * gain
+        error = np.where(np.isfinite(error), error, np.inf)
+        worst = float(np.max(error)) if error.size else 0.0
+        rms = float(np.sqrt(np.mean(error * error))) if error.size else 0.0
+        fits.append(EquivalentFit(name, coefficients, worst, rms))
+    return fits
+
+
+def _zero_d(name: str) -> tuple[float, ...]:
+    return (0.0,) * {'plumb_bob': 5, 'rational_polynomial': 8, 'equidistant': 4}[name]
+
+
+def _fit_model(name: str, theta: FloatArray, target: FloatArray,
+               scale: float) -> tuple[float, ...] | None:
+    """Fit one model to r(theta) = target (normalised); None where it cannot represent it."""
+    if theta.size < 8:
+        return _zero_d(name)
+    if name == 'equidistant':
+        t2 = theta * theta
+        basis = theta[:, None] * np.stack([t2, t2 ** 2, t2 ** 3, t2 ** 4], axis=1)
+        rhs = target - theta
+    else:
+        if not theta[-1] < math.radians(89.0):
+            return None     # a pinhole model cannot reach 90 deg (tan is infinite)
+        t = np.tan(theta)
+        r2 = t * t
+        powers = np.stack([r2, r2 * r2, r2 * r2 * r2], axis=1)
+        basis = t[:, None] * powers
+        rhs = target - t
+        if name == 'rational_polynomial':
+            # r (1 + den) = t (1 + num): linear in (num, den) (equation error, reweighted by
+            # the denominator below so the residual is the radius error).
+            basis = np.hstack([basis, -target[:, None] * powers])
+    # Columns scaled to unit norm (the powers of small radii are tiny and nearly collinear).
+    norms = np.linalg.norm(basis, axis=0)
+    norms = np.where(norms > 0, norms, 1.0)
+    basis = basis / norms
+    weights = np.ones(theta.size)
+    row_scale = np.ones(theta.size)
+    best, best_error = None, math.inf
+    for _ in range(LAWSON_PASSES):
+        w = np.sqrt(weights) * row_scale * scale
+        coef, *_ = np.linalg.lstsq(basis * w[:, None], rhs * w, rcond=None)
+        if not np.all(np.isfinite(coef)):
+            break
+        if name == 'rational_polynomial':
+            den = 1.0 + powers @ (coef[3:] / norms[3:])
+            if not np.all(den > 0):
+                break
+            row_scale = 1.0 / den
+        residual = np.abs(basis @ coef - rhs) * row_scale
+        worst = float(np.max(residual))
+        if worst < best_error:
+            best, best_error = coef / norms, worst
+        total = float(np.sum(weights * residual))
+        if not total > 0:
+            break
+        # Lawson: weight each sample by its share of the error (towards the minimax fit).
+        weights = np.maximum(weights * residual / total * theta.size, 1e-12)
+    if best is None:
+        return None
+    coef = best
+    c = [float(x) for x in coef]
+    if name == 'plumb_bob':
+        return (c[0], c[1], 0.0, 0.0, c[2])
+    if name == 'rational_polynomial':
+        return (c[0], c[1], 0.0, 0.0, c[2], c[3], c[4], c[5])
+    return tuple(c)
+
+
+def choose_equivalent(fits: list[EquivalentFit]) -> EquivalentFit:
+    """
+    Return the first model (in preference order) within EQUIVALENT_MAX_ERROR_PX, else the best.
+
+    :param fits: from :func:`fit_equivalent`.
+    :return: the chosen fit.
+    """
+    for fit in fits:
+        if fit.max_error_px <= EQUIVALENT_MAX_ERROR_PX:
+            return fit
+    return min(fits, key=lambda fit: fit.max_error_px)
 
 
 def _scale_k(boundary_ideal: FloatArray, disk: float, half_w: float, half_h: float,
@@ -609,15 +777,17 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0) -> L
     reach = min(1.02 * max(out_corner, raw_corner_ideal), disk * v * 1.001)
     curve = _trace_curve(prescription, distance, sensor_z, v, reach, CURVE_SAMPLES, projection)
 
-    raw_corner_theta = float(np.nanmax(b_theta))
-    D, dist_model, rms = _fit_equivalent_d(coarse, v, raw_corner_theta, min(px, py))
+    fits = fit_equivalent(coarse, v, K, w, h)
+    chosen = choose_equivalent(fits)
     disp = (boundary_ideal * v - np.stack([bx, by], axis=1)) / np.array([px, py])
     max_disp = float(np.nanmax(np.hypot(disp[:, 0], disp[:, 1])))
 
     model = LensModel(
         values=vals, prescription=prescription, width=w, height=h, out_width=ow,
         out_height=oh, pixel_mm=(px, py), focal_length_mm=f, image_distance_mm=v, curve=curve,
-        K=K, K_new=K_new, D=D, distortion_model=dist_model, fit_rms_px=rms,
+        K=K, K_new=K_new, D=chosen.D, distortion_model=chosen.distortion_model,
+        fit_rms_px=chosen.rms_error_px, equivalent_max_error_px=chosen.max_error_px,
+        equivalent_fits=tuple(fits),
         max_displacement_px=max_disp,
         interpolation=CV_INTERPOLATION[str(vals['output.interpolation'])],
         projection=projection, field_curve=coarse)
