@@ -970,6 +970,7 @@ def _full_field(model: LensModel) -> dict[str, Any]:
         theta, real, folded = traced.field_angle_rad, traced.real_mm, traced.folded
     return {'theta_rad': theta, 'real_mm': real, 'folded': folded,
             'max_field_angle_deg': math.degrees(float(theta[-1])),
+            'at_cap': bool(theta[-1] >= cap * (1.0 - 1e-9)),
             'image_circle_radius_mm': float(real[-1])}
 
 
@@ -1010,6 +1011,7 @@ def _covered_field(model: LensModel, field: Mapping[str, Any]) -> dict[str, Any]
 
     return {
         'max_field_angle_deg': field['max_field_angle_deg'],
+        'max_field_is_trace_limit': field['at_cap'],
         'image_circle_radius_mm': circle,
         'corners_covered': corner <= circle,
         'corner_field_angle_deg': angle(corner),
