@@ -59,7 +59,6 @@ import shutil
 import signal
 import statistics
 import struct
-import subprocess
 import sys
 import tempfile
 import time
@@ -68,11 +67,10 @@ from typing import Any, Mapping, Sequence
 from benchmarks.common import (
     fmt_ms, LoadMonitor, log, machine_info, machine_line, markdown_table, RESULTS, save_figure,
     write_json)
-from mechdeconv_ros.graph_env import MALLOC_ENV
+from mechdeconv_ros.graph_env import Child, graph_env, MALLOC_ENV, pick_domain_id
 
 REPO = Path(__file__).resolve().parents[1]
 CASE2_YAML = REPO / 'config' / 'case2.yaml'
-FASTDDS_PROFILE = REPO / 'config' / 'fastdds_shm.xml'
 SIZES = ((1280, 720), (1920, 1080))
 QUICK_SIZES = ((320, 240),)
 RATE_HZ = 30.0
@@ -113,92 +111,16 @@ def ros_env(domain_id: int, transport: str) -> dict[str, str]:
 
     :param domain_id: the private ROS_DOMAIN_ID.
     :param transport: ``'shm'`` (the package's Fast DDS profile) or ``'default'``.
-    :return: a copy of ``os.environ`` with the ROS, transport and malloc settings.
+    :return: :func:`mechdeconv_ros.graph_env.graph_env` (the package's settings, not the
+        caller's).
     """
-    env = dict(os.environ)
-    env.update(MALLOC_ENV)
-    env.update({
-        'ROS_DOMAIN_ID': str(domain_id),
-        'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
-        'PYTHONUNBUFFERED': '1',
-        'RCUTILS_COLORIZED_OUTPUT': '0',
-        'PYTHONPATH': os.pathsep.join(
-            [str(REPO)] + [p for p in env.get('PYTHONPATH', '').split(os.pathsep) if p]),
-    })
-    for name in ('ROS_LOCALHOST_ONLY', 'FASTDDS_BUILTIN_TRANSPORTS',
-                 'FASTRTPS_DEFAULT_PROFILES_FILE'):
-        env.pop(name, None)
-    if transport == 'shm':
-        env['FASTRTPS_DEFAULT_PROFILES_FILE'] = str(FASTDDS_PROFILE)
-    return env
+    return graph_env(domain_id, shm_profile=transport == 'shm')
 
 
-class Proc:
-    """A process in its own process group, stopped by SIGINT to the group."""
-
-    def __init__(self, argv: Sequence[str], env: Mapping[str, str], log_dir: Path,
-                 name: str) -> None:
-        """Start it; stdout and stderr go to ``log_dir/name.{out,err}``."""
-        self.name = name
-        self.argv = list(argv)
-        self.out_path, self.err_path = log_dir / f'{name}.out', log_dir / f'{name}.err'
-        self._out, self._err = open(self.out_path, 'wb'), open(self.err_path, 'wb')
-        self.proc = subprocess.Popen(self.argv, env=dict(env), stdout=self._out,
-                                     stderr=self._err, stdin=subprocess.DEVNULL,
-                                     start_new_session=True)
-        self.returncode: int | None = None
-        self.killed = False
-
-    @property
-    def pid(self) -> int:
-        """Return the PID (also the process group id)."""
-        return self.proc.pid
-
-    def cpu_s(self) -> float:
-        """Return the CPU seconds (user + system, all threads) used so far; 0 when gone."""
-        try:
-            with open(f'/proc/{self.pid}/stat', encoding='ascii') as stream:
-                fields = stream.read().rsplit(')', 1)[1].split()
-            return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
-        except (OSError, IndexError, ValueError):
-            return 0.0
-
-    def running(self) -> bool:
-        """Return True while it runs."""
-        return self.proc.poll() is None
-
-    def stop(self, timeout: float = 15.0) -> int:
-        """
-        SIGINT the process group, wait; SIGKILL the group after ``timeout``.
-
-        :return: the exit code (negative: ended by a signal).
-        """
-        if self.proc.poll() is None:
-            try:
-                os.killpg(self.pid, signal.SIGINT)
-            except ProcessLookupError:
-                pass
-            try:
-                self.proc.wait(timeout=timeout)
-            except subprocess.TimeoutExpired:
-                self.killed = True
-                try:
-                    os.killpg(self.pid, signal.SIGKILL)
-                except ProcessLookupError:
-                    pass
-        self.returncode = self.proc.wait()
-        for stream in (self._out, self._err):
-            if not stream.closed:
-                stream.close()
-        return self.returncode
-
-    def stdout(self) -> str:
-        """Return what it printed on stdout."""
-        return self.out_path.read_text(errors='replace')
-
-    def stderr_tail(self, lines: int = 15) -> str:
-        """Return the last lines of its stderr."""
-        return '\n'.join(self.err_path.read_text(errors='replace').splitlines()[-lines:])
+def start_child(argv: Sequence[str], env: Mapping[str, str], log_dir: Path,
+                name: str) -> Child:
+    """Start a process in its own group; stdout and stderr go to ``log_dir/name.{out,err}``."""
+    return Child(argv, env, log_dir / f'{name}.out', log_dir / f'{name}.err', name)
 
 
 def node_argv(kind: str) -> list[str]:
@@ -474,7 +396,7 @@ def bare_remap_ms(width: int, height: int, reps: int) -> dict[str, float]:
             'threads': threads}
 
 
-def _measure_once(probe: Probe, kind_proc: Proc, pub: Proc, seconds: float) -> dict[str, Any]:
+def _measure_once(probe: Probe, kind_proc: Child, pub: Child, seconds: float) -> dict[str, Any]:
     """Measure one window: frames, latency, and the CPU use of each process."""
     cpu0 = {'node': kind_proc.cpu_s(), 'publisher': pub.cpu_s()}
     probe_cpu0 = time.process_time()
@@ -505,7 +427,7 @@ def _stalled(stats: Mapping[str, Any]) -> bool:
     return stats.get('longest_gap_ms', 0.0) > STALL_GAP_MS
 
 
-def _run_window(probe: Probe, kind_proc: Proc, pub: Proc, seconds: float,
+def _run_window(probe: Probe, kind_proc: Child, pub: Child, seconds: float,
                 retries: int = MAX_RETRIES, stalls: bool = True) -> dict[str, Any]:
     """
     Warm up, then measure a window; measure again while other processes were busy.
@@ -581,27 +503,27 @@ def child_main(transport: str, quick: bool, out_json: Path) -> int:
     log_dir = Path(tempfile.mkdtemp(prefix=f'mechdeconv_bench_{transport}_'))
     doc['log_dir'] = str(log_dir)
     probe = Probe(domain)
-    running: list[Proc] = []
+    running: list[Child] = []
 
-    def stop(proc: Proc) -> None:
+    def stop(proc: Child) -> None:
         code = proc.stop()
         if proc in running:
             running.remove(proc)
         doc['exit_codes'].append({'process': proc.name, 'exit_code': code,
                                   'killed': proc.killed})
         if code != 0 or proc.killed:
-            doc['errors'].append(f'{proc.name} exited with {code}: {proc.stderr_tail()}')
+            doc['errors'].append(f'{proc.name} exited with {code}: {proc.tail()}')
 
     try:
         for width, height in sizes:
             size = f'{width}x{height}'
             for kind in ('passthrough', 'node'):
                 name = f'{kind}_{size}'
-                kind_proc = Proc(node_argv(kind), env, log_dir, name)
+                kind_proc = start_child(node_argv(kind), env, log_dir, name)
                 running.append(kind_proc)
                 if not probe.ready(READY_TIMEOUT_S):
                     doc['errors'].append(f'{name}: not ready after {READY_TIMEOUT_S} s: '
-                                         f'{kind_proc.stderr_tail()}')
+                                         f'{kind_proc.tail()}')
                 kind_rates: list[tuple[float, str]] = [
                     (rate, 'flat out' if rate == 0 else f'{rate:g} Hz') for rate in rates]
                 if kind == 'node' and 0.0 in rates:
@@ -611,8 +533,8 @@ def child_main(transport: str, quick: bool, out_json: Path) -> int:
                     if math.isfinite(target):
                         kind_rates.insert(-1, (target, TARGET_RATE))
                 for rate, label in kind_rates:
-                    pub = Proc(publisher_argv(width, height, rate), env, log_dir,
-                               f'publisher_{name}_{label.replace(" ", "_")}')
+                    pub = start_child(publisher_argv(width, height, rate), env, log_dir,
+                                      f'publisher_{name}_{label.replace(" ", "_")}')
                     running.append(pub)
                     stats = _run_window(probe, kind_proc, pub,
                                         paced_s if rate == RATE_HZ else short_s,
@@ -659,11 +581,6 @@ def child_main(transport: str, quick: bool, out_json: Path) -> int:
 # ---------------------------------------------------------------------------------------------
 # The benchmark (parent): one child per transport, then targets, figure, tables
 # ---------------------------------------------------------------------------------------------
-
-def _domain_id(offset: int) -> int:
-    """Return a private ROS_DOMAIN_ID (120-219, apart from the tests' 1-100)."""
-    return 120 + (os.getpid() + 37 * offset) % 100
-
 
 def _find(runs: Sequence[Mapping[str, Any]], **match: Any) -> Mapping[str, Any] | None:
     return next((r for r in runs if all(r.get(k) == v for k, v in match.items())), None)
@@ -760,17 +677,18 @@ def run(out_dir: Path = RESULTS, quick: bool = False, plots: bool = True,
                 '--transport', transport, '--out-json', str(out_json)]
         if quick:
             argv.append('--quick')
-        child = Proc(argv, ros_env(_domain_id(i), transport), log_dir, f'child_{transport}')
+        env = ros_env(pick_domain_id('benchmarks', 37 * i), transport)
+        child = start_child(argv, env, log_dir, f'child_{transport}')
         start = time.monotonic()
         while child.running() and time.monotonic() - start < CHILD_TIMEOUT_S:
             time.sleep(0.2)
         code = child.stop()
         if code != 0:
-            errors.append(f'child {transport} exited with {code}: {child.stderr_tail()}')
+            errors.append(f'child {transport} exited with {code}: {child.tail()}')
         if out_json.exists():
             children[transport] = json.loads(out_json.read_text())
             errors += [f'[{transport}] {e}' for e in children[transport]['errors']]
-        sys.stderr.write(child.err_path.read_text(errors='replace'))
+        sys.stderr.write(child.stderr())
     if not errors:
         # The process logs are kept only when something went wrong (their folders are named
         # in the errors and in each child's ``log_dir``).

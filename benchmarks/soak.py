@@ -7,7 +7,7 @@ The long run: correct_node at full rate for minutes, its memory sampled every se
 
 Three processes, with the environment of :func:`benchmarks.node_latency.ros_env` (the package's
 Fast DDS profile, the Makefile's ``MALLOC_*`` settings, discovery on localhost) and a private
-``ROS_DOMAIN_ID`` (220-232, apart from the tests' and the other benchmarks'):
+``ROS_DOMAIN_ID`` (the soak's range of :data:`mechdeconv_ros.graph_env.DOMAIN_RANGES`):
 
 * the publisher of :mod:`benchmarks.node_latency` (``--role publisher``): one 1280x720 rgb8
   frame, paced at 30 Hz, stamped with the wall clock;
@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 from pathlib import Path
 import statistics
 import sys
@@ -47,8 +46,8 @@ import time
 from typing import Any, Sequence
 
 from benchmarks.common import LoadMonitor, log, machine_info, machine_line, RESULTS, write_json
-from benchmarks.node_latency import (
-    node_argv, Probe, Proc, publisher_argv, ros_env)
+from benchmarks.node_latency import node_argv, Probe, publisher_argv, ros_env, start_child
+from mechdeconv_ros.graph_env import Child, configure_this_process, pick_domain_id
 
 WIDTH, HEIGHT, RATE_HZ = 1280, 720, 30.0
 SET_EVERY_S = 30.0
@@ -58,11 +57,6 @@ FULL_RUN_MIN = 10.0
 READY_TIMEOUT_S = 20.0
 FLAT_MIN_MIB = 1.0
 FLAT_NOISE_SIGMAS = 3.0
-
-
-def _domain_id() -> int:
-    """Return a private ROS_DOMAIN_ID in 220-232 (tests use 1-100, node_latency 120-219)."""
-    return 220 + os.getpid() % 13
 
 
 def fit_line(t_min: Sequence[float], y: Sequence[float]) -> dict[str, float]:
@@ -205,13 +199,11 @@ def run(minutes: float, out_dir: Path, set_every_s: float = SET_EVERY_S,
     """
     import psutil
 
-    domain = _domain_id()
+    domain = pick_domain_id('soak')
     env = ros_env(domain, 'shm')
     # This process's own participant must use the same transport profile (read once, at the
     # first participant of the process).
-    for key in ('FASTRTPS_DEFAULT_PROFILES_FILE', 'ROS_AUTOMATIC_DISCOVERY_RANGE'):
-        os.environ[key] = env[key]
-    os.environ.pop('ROS_LOCALHOST_ONLY', None)
+    configure_this_process(env)
     tag = f'{minutes:g}min'
     log_dir = Path(tempfile.mkdtemp(prefix='mechdeconv_soak_'))
     doc: dict[str, Any] = {
@@ -221,18 +213,18 @@ def run(minutes: float, out_dir: Path, set_every_s: float = SET_EVERY_S,
         'env': {k: env.get(k) for k in ('FASTRTPS_DEFAULT_PROFILES_FILE',
                                         'MALLOC_MMAP_THRESHOLD_', 'MALLOC_TRIM_THRESHOLD_')},
         'samples': [], 'sets': [], 'exit_codes': {}, 'errors': []}
-    node = Proc(node_argv('node'), env, log_dir, 'correct_node')
+    node = start_child(node_argv('node'), env, log_dir, 'correct_node')
     probe = SoakProbe(domain)
-    pub: Proc | None = None
+    pub: Child | None = None
     try:
         ready_by = time.monotonic() + READY_TIMEOUT_S
         if not probe.spin_until_deadline(
                 lambda: probe.node.count_subscribers('/image_raw') > 0, ready_by):
-            raise RuntimeError(f'correct_node not ready: {node.stderr_tail()}')
-        pub = Proc(publisher_argv(width, height, rate_hz), env, log_dir, 'publisher')
+            raise RuntimeError(f'correct_node not ready: {node.tail()}')
+        pub = start_child(publisher_argv(width, height, rate_hz), env, log_dir, 'publisher')
         if not probe.spin_until_deadline(lambda: bool(probe.frames),
                                          time.monotonic() + READY_TIMEOUT_S):
-            raise RuntimeError(f'no frame: {node.stderr_tail()}')
+            raise RuntimeError(f'no frame: {node.tail()}')
         proc = psutil.Process(node.pid)
         monitor = LoadMonitor(lambda: time.process_time() + node.cpu_s() + pub.cpu_s())
         start = time.monotonic()
@@ -255,7 +247,7 @@ def run(minutes: float, out_dir: Path, set_every_s: float = SET_EVERY_S,
             if time.monotonic() < start + tick:
                 continue
             if not node.running():
-                doc['errors'].append(f'correct_node exited: {node.stderr_tail()}')
+                doc['errors'].append(f'correct_node exited: {node.tail()}')
                 break
             frames = probe.frames[seen:]
             seen = len(probe.frames)
@@ -295,9 +287,9 @@ def run(minutes: float, out_dir: Path, set_every_s: float = SET_EVERY_S,
                 code = proc_.stop()
                 doc['exit_codes'][name] = code
                 if code != 0 or proc_.killed:
-                    doc['errors'].append(f'{name} exited with {code}: {proc_.stderr_tail()}')
-        doc['node_stderr_tail'] = node.stderr_tail(5)
-        if 'Traceback' in node.err_path.read_text(errors='replace'):
+                    doc['errors'].append(f'{name} exited with {code}: {proc_.tail()}')
+        doc['node_stderr_tail'] = node.tail(5)
+        if 'Traceback' in node.stderr():
             doc['errors'].append('Traceback in the node log')
     summarize(doc)
     write_json(out_dir / f'soak_{tag}.json', doc)
