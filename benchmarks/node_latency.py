@@ -3,12 +3,13 @@
 """
 The ROS 2 node end to end: throughput, latency and parameter-set reaction, vs a pass-through.
 
-Three processes per measurement, all with the Makefile's environment (``MALLOC_*``, discovery
-limited to localhost) and a private ``ROS_DOMAIN_ID``:
+Three processes per measurement, all with the graph environment of
+:func:`mechdeconv_ros.graph_env.graph_env` (``MALLOC_*``, discovery limited to localhost) and a
+private ``ROS_DOMAIN_ID`` (the benchmarks' range):
 
 * a **publisher** (``python -m benchmarks.node_latency --role publisher``): one prebuilt
   sensor_msgs/Image (rgb8), ``header.stamp`` set to the wall clock just before each publish,
-  paced at 30 Hz, 60 Hz or the throughput target (below), or as fast as it can (flat out);
+  paced at 30 Hz, 60 Hz or the serial bound (below), or as fast as it can (flat out);
 * the **node under test**: ``python -m mechdeconv_ros.correct_node --ros-args --params-file
   config/case2.yaml -p sensor.width_px:=0 -p sensor.height_px:=0`` (the sensor size from the
   frames), or the **pass-through** baseline :mod:`benchmarks.passthrough_node` (subscribe and
@@ -20,7 +21,7 @@ limited to localhost) and a private ``ROS_DOMAIN_ID``:
 
 Latency = probe receive time - ``header.stamp`` (two hops: publisher -> node -> probe),
 p50/p99 at 30 Hz. Throughput: the pass-through's with the publisher flat out; the node's as
-the frames per second it delivers of a camera paced at the throughput target (a publisher
+the frames per second it delivers of a camera paced at the serial bound (a publisher
 flooding flat out keeps one of the two cores busy and starves the node, so that figure is
 recorded too but is not the node's capacity). Each transport runs in its own child
 benchmark process, because Fast DDS reads its profile once per process: ``shm`` =
@@ -44,8 +45,8 @@ bound of a relay that does the pass-through's work and then the remap, one frame
 * throughput: the node delivers (>= 97 %, best effort loses a frame now and then even when
   idle) a camera paced at ``1 / (1 / pass-through fps + bare remap time)``, the pass-through
   measured with the publisher flat out;
-* latency: node p50 at 30 Hz <= pass-through p50 + 1.5 x bare remap time (one remap, plus
-  half a remap of slack for the copy out and the scheduling of three processes on 2 cores);
+* latency: node p50 at 30 Hz <= pass-through p50 + 1.5 x bare remap time (the relay's own
+  latency plus one remap, with half a remap time of margin);
 * parameter set -> first new frame <= 2 frame periods at 30 fps.
 
 Each is reported as "met" or "missed". The bare remap time is ``Rectifier.correct`` at the
@@ -56,8 +57,9 @@ The machine is shared: how many cores other processes kept busy is recorded per 
 window during which they kept more than 0.3 cores busy is measured once more (the stream keeps
 running); the less disturbed window is kept and the other recorded under ``discarded``.
 
-Every process is started in its own process group and stopped by SIGINT to the group; exit
-codes are recorded and a non-zero one is reported.
+Every process is a :class:`mechdeconv_ros.graph_env.Child`: started in its own process group,
+stopped by SIGINT to the group (then SIGTERM, SIGKILL if it hangs); exit codes are recorded
+and a non-zero one, or an escalation, is reported.
 """
 
 from __future__ import annotations
