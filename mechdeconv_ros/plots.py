@@ -140,9 +140,15 @@ def make_figure(model: LensModel) -> Any:
     for ax, title in panels:
         ax.set_title(title)
         ax.set_axis_off()
-    fig.suptitle(f'f = {model.focal_length_mm:.4g} mm, stop offset '
-                 f"{model.values['lens.stop_offset_mm']:g} mm, scene "
-                 f"{model.values['scene.distance_mm'] or 'inf'} mm, "
+    values = model.values
+    if values['lens.surfaces.radius_mm']:
+        stop = f"{len(values['lens.surfaces.radius_mm'])} surfaces, stop surface " \
+            f"{values['lens.stop_surface']}"
+    else:
+        stop = f"stop offset {values['lens.stop_offset_mm']:g} mm"
+    distance = values['scene.distance_mm']
+    scene = f'scene at {distance:g} mm' if distance else 'scene at infinity'
+    fig.suptitle(f'f = {model.focal_length_mm:.4g} mm, {stop}, {scene}, '
                  f'{model.width}x{model.height} px')
     # The layout first: the panels' size in display px sets how wide the chart's lines are.
     fig.tight_layout()
