@@ -114,16 +114,22 @@ class LiveStatus:
 class FrameDropped(Exception):
     """A frame that cannot be corrected; ``repeat`` is True for an already reported cause."""
 
-    def __init__(self, reason: str, hint: str = '', repeat: bool = False) -> None:
+    def __init__(self, kind: str, reason: str, hint: str = '', repeat: bool = False) -> None:
         """
         Keep the reason.
 
+        :param kind: ``'size'`` (the sensor size disagrees) or ``'build'`` (no model).
         :param reason: why (for ``last_error`` and the log).
         :param hint: what the user can do (for the log only).
         :param repeat: the cause was reported before: count the frame, do not log again.
         """
         super().__init__(reason)
-        self.reason, self.hint, self.repeat = reason, hint, repeat
+        self.kind, self.reason, self.hint, self.repeat = kind, reason, hint, repeat
+
+    @property
+    def log_line(self) -> str:
+        """Return the log line: the reason and the hint."""
+        return f'dropping frames: {self.reason}' + (f'; {self.hint}' if self.hint else '')
 
 
 def plain(value: Any) -> Any:
@@ -306,11 +312,11 @@ class LiveModel:
         fixed_w, fixed_h = int(values['sensor.width_px']), int(values['sensor.height_px'])
         if (fixed_w and fixed_w != width) or (fixed_h and fixed_h != height):
             raise FrameDropped(
-                f'frame is {width}x{height} px but sensor.width_px x sensor.height_px is '
+                'size', f'frame is {width}x{height} px but sensor.width_px x sensor.height_px is '
                 f'{fixed_w or width}x{fixed_h or height}',
                 hint='set both to 0 to follow the images, or fix the camera resolution')
         if self._failed_build == (generation, width, height):
-            raise FrameDropped('', repeat=True)     # known to fail: do not rebuild every frame
+            raise FrameDropped('build', '', repeat=True)     # known to fail: do not retry
         with self._lock:
             previous_size, self._input_size = self._input_size, (width, height)
         try:
@@ -322,7 +328,7 @@ class LiveModel:
                 if self._input_size == (width, height):
                     self._input_size = previous_size
             self._failed_build = (generation, width, height)
-            raise FrameDropped(f'no model for {width}x{height} px: {err}') from err
+            raise FrameDropped('build', f'no model for {width}x{height} px: {err}') from err
         self._log('info', f'input is {width}x{height} px: model built in '
                           f'{candidate.build_ms:.1f} ms')
         with self._lock:

@@ -127,7 +127,7 @@ def gate() -> Iterator[Gate]:
 
 @pytest.fixture
 def live(gate: Gate) -> Iterator[LiveModel]:
-    """A live model following the frames (no sensor size), before its first frame."""
+    """Return a live model following the frames (no sensor size), before its first frame."""
     live = make_live(gate)
     yield live
     live.stop()
