@@ -61,7 +61,8 @@ import yaml
 
 FloatArray = npt.NDArray[np.float64]
 
-#: Samples of the radial map (DESIGN: at least 1024 from 0 to past the output corner).
+#: Samples of the radial map (at least 1024 from 0 to past the output corner: docs/design.md
+#: section 2.5).
 CURVE_SAMPLES = 2048
 #: Largest field angle a pinhole (rectilinear) output shows: its radial magnification
 #: 1/cos^2(theta) grows without bound towards 90 deg (11x at 73, 130x at 85 deg).
