@@ -539,8 +539,8 @@ def test_double_array_parameters_can_be_set_and_cleared(harness: Harness,
     assert_camera_infos(_exchange_until_model(harness, outputs, msg, model), model)
 
 
-def test_aspheric_prescription_and_equidistant_output_rebuild(harness: Harness,
-                                                               outputs: Outputs) -> None:
+def test_aspheric_prescription_and_equidistant_output_rebuild(
+        harness: Harness, outputs: Outputs) -> None:
     width, height = SMALL
     src = test_pattern(width, height)
     msg = make_image(src, 'mono8')
