@@ -44,6 +44,7 @@ centre of the top-left pixel.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+import functools
 import math
 from typing import Any, Callable, Mapping
 
@@ -537,6 +538,7 @@ def equivalent_radius(distortion_model: str, D: tuple[float, ...] | FloatArray,
         return t * num
 
 
+@functools.lru_cache(maxsize=8)
 def _raw_probe_points(width: int, height: int) -> FloatArray:
     """Return the raw pixels the consumer error is measured on: edges, corners and a grid."""
     xs = np.linspace(-0.5, width - 0.5, 41)
@@ -545,8 +547,8 @@ def _raw_probe_points(width: int, height: int) -> FloatArray:
     return np.concatenate([_boundary_points(width, height), grid])
 
 
-def fit_equivalent(field: RadialMap, v: float, K: FloatArray, width: int,
-                   height: int) -> list[EquivalentFit]:
+def fit_equivalent(field: RadialMap, v: float, K: FloatArray, width: int, height: int,
+                   every: bool = False) -> list[EquivalentFit]:
     """
     Fit every consumer model to the traced field and measure it over the raw image.
 
@@ -562,7 +564,9 @@ def fit_equivalent(field: RadialMap, v: float, K: FloatArray, width: int,
     :param K: raw camera matrix.
     :param width: raw width, px.
     :param height: raw height, px.
-    :return: one :class:`EquivalentFit` per model in :data:`EQUIVALENT_MODELS` order.
+    :param every: fit every model; by default the fits stop at the first model within
+        EQUIVALENT_MAX_ERROR_PX (the one published: the rest would cost rebuild time).
+    :return: one :class:`EquivalentFit` per model fitted, in :data:`EQUIVALENT_MODELS` order.
     """
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
     points = _raw_probe_points(width, height)
@@ -578,8 +582,10 @@ def fit_equivalent(field: RadialMap, v: float, K: FloatArray, width: int,
     theta = np.linspace(0.0, limit, FIT_SAMPLES + 1)[1:]
     target = np.interp(theta, field.field_angle_rad, field.real_mm) / v
     scale = max(fx, fy)
-    fits = []
+    fits: list[EquivalentFit] = []
     for name in EQUIVALENT_MODELS:
+        if fits and fits[-1].max_error_px <= EQUIVALENT_MAX_ERROR_PX and not every:
+            break       # the simpler model is chosen: the others are not needed
         coefficients = _fit_model(name, theta, target, scale)
         if coefficients is None and name == 'rational_polynomial' and fits[0].D != _zero_d(
                 'plumb_bob') and math.isfinite(fits[0].max_error_px):
@@ -640,7 +646,13 @@ def _fit_model(name: str, theta: FloatArray, target: FloatArray,
             row_scale = 1.0 / den
         residual = np.abs(basis @ coef - rhs) * row_scale
         worst = float(np.max(residual))
+        if worst * scale <= 0.5 * EQUIVALENT_MAX_ERROR_PX:
+            best = coef / norms
+            break       # well within the bound: the minimax refinement is not needed
         if worst < best_error:
+            if worst > 0.98 * best_error and best is not None:
+                best = coef / norms
+                break   # Lawson has converged (under 2 % gained)
             best, best_error = coef / norms, worst
         total = float(np.sum(weights * residual))
         if not total > 0:
