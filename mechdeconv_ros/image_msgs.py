@@ -15,8 +15,8 @@ Output images are preallocated (:class:`OutputImagePool`): one ``Image`` per
 ``array.array('B', bytes(n))``, with a numpy view on that buffer. ``cv2.remap(..., dst=view)``
 then writes straight into the message, and ``publish()`` copies it synchronously, so the same
 message is reused frame after frame. Never assign a numpy array or a memoryview to
-``msg.data``: rclpy's setter iterates it element by element (tens of ms even at 640x480;
-shared/reference/perf-anchors.md section 5).
+``msg.data``: rclpy's setter iterates it element by element (34 to 62 ms at 640x480;
+docs/design.md section 4.4).
 
 Supported encodings (sensor_msgs/image_encodings.hpp names): ``mono8``, ``mono16``, ``rgb8``,
 ``bgr8``, ``rgba8``, ``bgra8``, ``8UC1``, ``8UC3``, ``8UC4``, ``16UC1`` and ``32FC1``. The last
@@ -290,7 +290,9 @@ def fill_camera_info(info: CameraInfo, model: LensModel, *, rectified: bool) -> 
     ``camera_info``: the raw image size, ``K`` and ``D`` of the raw (distorted) camera with
     ``D`` the equivalent plumb_bob / rational_polynomial coefficients, ``R`` identity and
     ``P = [K_new | 0]``. ``rectified=True`` describes the corrected image itself: the output
-    size, ``K = K_new``, ``D`` all zero (plumb_bob), ``R`` identity, the same ``P``.
+    size, ``K = K_new``, ``D`` all zero (plumb_bob; ``equidistant`` with four zeros when
+    ``output.projection`` is equidistant: the corrected image is then an ideal fisheye,
+    r = f theta, with f from ``K_new``), ``R`` identity, the same ``P``.
 
     :param info: the message to fill (modified in place).
     :param model: the lens model.
@@ -300,8 +302,13 @@ def fill_camera_info(info: CameraInfo, model: LensModel, *, rectified: bool) -> 
     if rectified:
         info.width = int(model.out_width)
         info.height = int(model.out_height)
-        info.distortion_model = 'plumb_bob'
-        info.d = [0.0] * 5
+        if model.projection == 'equidistant':
+            # An ideal fisheye (r = f theta): cv2.fisheye / image_geometry read D = 0 as such.
+            info.distortion_model = 'equidistant'
+            info.d = [0.0] * 4
+        else:
+            info.distortion_model = 'plumb_bob'
+            info.d = [0.0] * 5
         info.k = np.asarray(model.K_new, dtype=np.float64).reshape(9)
     else:
         info.width = int(model.width)
@@ -331,3 +338,14 @@ def camera_info_from_model(model: LensModel, *, rectified: bool) -> CameraInfo:
     :return: the message, with an empty header.
     """
     return fill_camera_info(CameraInfo(), model, rectified=rectified)
+
+
+def camera_infos_from_model(model: LensModel) -> tuple[CameraInfo, CameraInfo]:
+    """
+    Return the ``camera_info`` and ``camera_info_rect`` messages of a model.
+
+    :param model: the lens model.
+    :return: ``(raw camera, corrected image)``, see :func:`fill_camera_info`.
+    """
+    return (camera_info_from_model(model, rectified=False),
+            camera_info_from_model(model, rectified=True))

@@ -31,6 +31,10 @@ import yaml
 
 ParamValue = Union[bool, int, float, str, list]
 
+#: Powers of r of the even asphere terms, ``lens.surfaces.asphere_a4`` ... ``asphere_a16``.
+ASPHERE_POWERS = (4, 6, 8, 10, 12, 14, 16)
+#: Allowed values of ``output.projection``: the corrected image's projection.
+PROJECTIONS = ('pinhole', 'equidistant')
 #: Allowed values of ``output.interpolation`` and the OpenCV flag names they stand for.
 INTERPOLATIONS = ('nearest', 'linear', 'cubic', 'lanczos4')
 
@@ -131,6 +135,12 @@ SCHEMA: tuple[ParamSpec, ...] = (
     _a('lens.surfaces.semi_diameter_mm', 'mm',
        'Prescription mode: clear semi-diameter of each surface (0 = unlimited); empty = all '
        'unlimited.', 0.0, 1.0e4),
+    _a('lens.surfaces.conic', '1',
+       'Prescription mode: conic constant k of each surface (0 sphere, -1 paraboloid, < -1 '
+       'hyperboloid); empty = all spheres.', -1.0e3, 1.0e3),
+    *(_a(f'lens.surfaces.asphere_a{p}', f'mm^{1 - p}',
+         f'Prescription mode: even asphere coefficient a{p} of each surface (sag term '
+         f'a{p} r^{p}); empty = all 0.', -1.0e6, 1.0e6) for p in ASPHERE_POWERS),
     _i('lens.stop_surface', 0, '1',
        'Prescription mode: 0-based index of the surface whose axial point the chief ray '
        'crosses (the aperture stop).', 0, 255),
@@ -156,6 +166,11 @@ SCHEMA: tuple[ParamSpec, ...] = (
     _d('output.alpha', 0.0, '1',
        'Scale of the corrected image as in getOptimalNewCameraMatrix: 0 keeps only valid pixels '
        '(no black border), 1 keeps every source pixel in view.', 0.0, 1.0),
+    ParamSpec('output.projection', 'string', 'pinhole', '',
+              'Projection of the corrected image: pinhole (rectilinear, r = f tan(theta), at '
+              'most 85 deg off axis) or equidistant (ideal fisheye, r = f theta, any field; '
+              'camera_info_rect then says distortion_model equidistant with D = 0).',
+              choices=PROJECTIONS),
     ParamSpec('output.interpolation', 'string', 'linear', '',
               'Interpolation of the remap: nearest, linear, cubic or lanczos4. Depth images '
               '(16UC1, 32FC1) always use nearest.', choices=INTERPOLATIONS),

@@ -65,7 +65,7 @@ def test_radial_map_is_dense_monotonic_and_paraxial_at_centre(case2):
     assert np.all(np.diff(curve.real_mm) > 0)
     assert curve.real_mm[0] == 0.0
     assert_allclose(curve.real_mm[1] / curve.ideal_mm[1], 1.0, atol=1e-6)
-    # Past the output corner, as DESIGN asks.
+    # Past the output corner (docs/design.md section 2.5).
     corner = math.hypot(320 / case2.K_new[0, 0], 240 / case2.K_new[1, 1])
     assert curve.valid_ideal_mm >= corner * case2.image_distance_mm
     # This lens with its stop inside the glass is barrel-distorted at the corner.
@@ -180,21 +180,10 @@ def test_rational_model_when_plumb_bob_misses():
     model = build_model({'sensor.width_px': 3840, 'sensor.height_px': 2160})
     assert model.distortion_model == 'rational_polynomial'
     assert len(model.D) == 8
-    plumb_rms = _plumb_rms(model)
-    assert model.fit_rms_px < plumb_rms
-
-
-def _plumb_rms(model):
-    from mechdeconv_ros.model import _fit_equivalent_d
-    curve = model.curve
-    keep = curve.ideal_mm > 0
-    r = curve.ideal_mm[keep] / model.image_distance_mm
-    d = curve.real_mm[keep] / model.image_distance_mm
-    a = (r[:, None] * np.stack([r ** 2, r ** 4, r ** 6], axis=1))
-    k, *_ = np.linalg.lstsq(a, d - r, rcond=None)
-    assert _fit_equivalent_d  # the function under test is the model's own
-    return float(np.sqrt(np.mean((a @ k - (d - r)) ** 2)) * model.image_distance_mm
-                 / min(model.pixel_mm))
+    fits = {fit.distortion_model: fit for fit in model.equivalent_fits}
+    assert fits['plumb_bob'].max_error_px > 0.05
+    assert model.equivalent_max_error_px == fits['rational_polynomial'].max_error_px <= 0.05
+    assert model.fit_rms_px < fits['plumb_bob'].rms_error_px
 
 
 def test_stop_offset_changes_the_distortion():

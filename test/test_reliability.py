@@ -448,6 +448,8 @@ def hostile_attempts() -> list[Attempt]:
                  'lanczos8', '\x00', 'x' * 1000):
         add('unknown choice', [param_msg('output.interpolation', text,
                                          Parameter.Type.STRING)])
+    for text in ('', 'fisheye', 'Equidistant', 'stereographic', 'pinhole ', '\x00'):
+        add('unknown choice', [param_msg('output.projection', text, Parameter.Type.STRING)])
     # Sets the schema allows field by field but that describe no camera.
     model_level = [
         ('not glass', {'lens.refractive_index': 1.0}, ('lens.refractive_index',)),
@@ -471,6 +473,16 @@ def hostile_attempts() -> list[Attempt]:
          ('lens.surfaces.refractive_index',)),
         ('stop surface beyond the lens', dict(prescription(2), **{'lens.stop_surface': 7}),
          ('lens.stop_surface',)),
+        ('asphere array of the wrong length',
+         dict(prescription(2), **{'lens.surfaces.asphere_a6': [1e-4] * 3}),
+         ('lens.surfaces.asphere_a6',)),
+        ('conic array of the wrong length', dict(prescription(4), **{'lens.surfaces.conic':
+                                                                     [-1.0]}),
+         ('lens.surfaces.conic',)),
+        ('conic leaves the sag undefined inside the semi-diameter',
+         dict(prescription(2), **{'lens.surfaces.semi_diameter_mm': [3.0, 3.0],
+                                  'lens.surfaces.conic': [5.0, 0.0]}),
+         ('lens.surfaces.conic',)),
     ]
     for category, change, blame in model_level:
         messages = [param_msg(k, v, Parameter.Type.DOUBLE_ARRAY if isinstance(v, list)
@@ -1244,6 +1256,28 @@ def test_rebuild_thread_is_a_daemon_and_ends_with_the_node() -> None:
         assert len(workers) == 1 and workers[0].daemon and workers[0].is_alive()
         node.destroy_node()
         assert not workers[0].is_alive(), 'destroy_node must end the rebuild thread'
+    finally:
+        rclpy.try_shutdown(context=context)
+        cv2.setNumThreads(threads)
+
+
+def test_diagnostics_status_is_named_after_the_fully_qualified_node_name() -> None:
+    import cv2
+    import rclpy
+    from rclpy.context import Context
+    from mechdeconv_ros.correct_node import CorrectNode
+    from mechdeconv_ros.diagnostics import status_name
+
+    threads = cv2.getNumThreads()
+    context = Context()
+    rclpy.init(context=context, domain_id=next_domain_id())
+    try:
+        node = CorrectNode(context=context, namespace='left', parameter_overrides=[
+            Parameter('sensor.width_px', value=64), Parameter('sensor.height_px', value=48)])
+        try:
+            assert status_name(node) == '/left/correct_node: lens correction'
+        finally:
+            node.destroy_node()
     finally:
         rclpy.try_shutdown(context=context)
         cv2.setNumThreads(threads)
