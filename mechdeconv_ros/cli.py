@@ -107,7 +107,9 @@ def format_report(report: dict[str, Any]) -> str:
         f"hyperfocal {report['hyperfocal_mm']:.4g} ± {report['hyperfocal_sigma_mm']:.2g} mm, "
         f"depth of field {mm(dof['near'])} to {mm(dof['far'])}",
         f"distortion: max displacement {report['max_displacement_px']:.3f} px, "
-        f"corner sigma {report['corner_sigma_px']:.3g} px",
+        # no corner sigma when the corners lie outside the image circle (a fisheye)
+        'corner sigma ' + ('n/a' if report['corner_sigma_px'] is None
+                           else f"{report['corner_sigma_px']:.3g} px"),
         f"equivalent calibration: {report['distortion_model']} D = "
         f"[{', '.join(f'{d:.6g}' for d in report['D'])}] (max error "
         f"{_px(report['equivalent_max_error_px'])} over the raw image, RMS "
