@@ -100,6 +100,8 @@ CONTINUATION_PASSES = 64
 #: Step halvings of the first pass from the paraxial starts: a ray that needs more is aimed
 #: again by continuation from its solved neighbours (cheaper than halving on).
 FIRST_PASS_HALVINGS = 8
+#: Shortest continuation step towards a sample, relative to its field (see _bridge).
+BRIDGE_MIN_STEP = 1e-4
 #: Newton iterations and step halvings from an extrapolated start (it is close: few needed).
 CONTINUATION_ITERATIONS = 12
 CONTINUATION_HALVINGS = 8
@@ -657,10 +659,42 @@ def _aim_continued(problem: _ChiefRayProblem, field: np.ndarray) -> np.ndarray:
             result = _aim(problem, field[todo], start, CONTINUATION_ITERATIONS,
                           CONTINUATION_HALVINGS)
             if not np.isfinite(result[0]):
-                break      # the frontier sample fails from a good start: the field ends
+                # The step to the frontier may be too long for the extrapolation: walk to it
+                # in shorter steps; if even those fail, the field ends before it.
+                result[0] = _bridge(problem, (f0, h0), (f1, h1), float(field[todo[0]]))
+                if not np.isfinite(result[0]):
+                    break
             height[todo] = result
             window = window * 2 if np.isfinite(result).all() else max(4, window // 2)
     return height
+
+
+def _bridge(problem: _ChiefRayProblem, before: tuple[float, float],
+            last: tuple[float, float], target: float) -> float:
+    """
+    Aim the chief ray of ``target`` by continuation in steps that halve on failure.
+
+    ``before`` and ``last`` are the two solved (field, offset) pairs below ``target``. A step
+    that converges is taken and the next one tried at twice its length (up to the target);
+    one that fails is halved, down to BRIDGE_MIN_STEP of the field: there the branch of chief
+    rays ends (NaN).
+    """
+    (f0, h0), (f1, h1) = before, last
+    step = target - f1
+    minimum = BRIDGE_MIN_STEP * max(abs(target), 1e-3)
+    while abs(step) >= minimum:
+        trial = min(f1 + step, target) if step > 0 else max(f1 + step, target)
+        start = h1 if f1 == f0 else h1 + (h1 - h0) / (f1 - f0) * (trial - f1)
+        solved = _aim(problem, np.array([trial]), np.array([start]), CONTINUATION_ITERATIONS,
+                      CONTINUATION_HALVINGS)[0]
+        if np.isfinite(solved):
+            if trial == target:
+                return float(solved)
+            (f0, h0), (f1, h1) = (f1, h1), (trial, float(solved))
+            step *= 2.0
+        else:
+            step *= 0.5
+    return math.nan
 
 
 def _field_variable(problem: _ChiefRayProblem, tan: np.ndarray | None,

@@ -51,6 +51,7 @@ from behind (cos_i <= 0).
 
 from __future__ import annotations
 
+import functools
 from typing import Protocol, Union
 
 import numpy as np
@@ -90,10 +91,15 @@ def is_spherical(surface: SurfaceShape) -> bool:
 
 def _poly(surface: SurfaceShape) -> tuple[float, ...]:
     """Return a4..a16 without trailing zeros (so an all-zero asphere costs nothing)."""
-    coefficients = list(surface.asphere)
-    while coefficients and coefficients[-1] == 0.0:
-        coefficients.pop()
-    return tuple(float(a) for a in coefficients)
+    return _trimmed(tuple(surface.asphere))
+
+
+@functools.lru_cache(maxsize=256)
+def _trimmed(coefficients: tuple[float, ...]) -> tuple[float, ...]:
+    out = [float(a) for a in coefficients]
+    while out and out[-1] == 0.0:
+        out.pop()
+    return tuple(out)
 
 
 def sag(surface: SurfaceShape, r2: ArrayLike) -> np.ndarray:
@@ -122,19 +128,21 @@ def _sag_and_slope(surface: SurfaceShape, u: np.ndarray) -> tuple[np.ndarray, np
     c = surface.curvature_per_mm
     q = 1.0 + surface.conic
     with np.errstate(**_ERRSTATE):
-        root = np.sqrt(1.0 - q * c * c * u)     # NaN outside the domain
+        root = np.sqrt(1.0 - (q * c * c) * u)     # NaN outside the domain
         z = c * u / (1.0 + root)
-        dz = c / (2.0 * root)
+        dz = (0.5 * c) / root
         poly = _poly(surface)
         if poly:
-            # Horner in u: sum_j a_{2j+4} u^(j+2) and its derivative.
-            value = np.zeros_like(u)
-            slope = np.zeros_like(u)
-            for j in range(len(poly) - 1, -1, -1):
+            # Horner in u: P = sum_j a_j u^j and Q = sum_j (j + 2) a_j u^j, so that the
+            # asphere terms are P u^2 and their derivative Q u.
+            last = len(poly) - 1
+            value: np.ndarray | float = poly[last]
+            slope: np.ndarray | float = (last + 2) * poly[last]
+            for j in range(last - 1, -1, -1):
                 value = value * u + poly[j]
                 slope = slope * u + (j + 2) * poly[j]
-            z = z + value * u * u
-            dz = dz + slope * u
+            z += value * u * u
+            dz += slope * u
     return z, dz
 
 
@@ -204,12 +212,11 @@ def intersect(surface: SurfaceShape, x: ArrayLike, y: ArrayLike, z_local: ArrayL
         # The quadric's vertex-side branch (its sag is the conic part), else start on the plane.
         branch = 1.0 - c * q * (z + s * kz)
         start = np.where(np.isfinite(s) & (branch > 0), s, -z / kz)
-        s = _newton(surface, x, y, z, kx, ky, kz, start, meridional)
+        s, u, height, slope = _newton(surface, x, y, z, kx, ky, kz, start, meridional)
         py = y + s * ky
         pz = z + s * kz
         px = 0.0 if meridional else x + s * kx
-        u = py * py if meridional else px * px + py * py
-        height, slope = _sag_and_slope(surface, u)
+        # The normal where Newton made its last (< 1e-12 mm) step: the same to ~1e-12.
         norm = np.sqrt(1.0 + 4.0 * u * slope * slope)
         nx = 0.0 if meridional else -2.0 * px * slope / norm
         ny = -2.0 * py * slope / norm
@@ -220,10 +227,17 @@ def intersect(surface: SurfaceShape, x: ArrayLike, y: ArrayLike, z_local: ArrayL
 
 
 def _newton(surface: SurfaceShape, x: ArrayLike, y: np.ndarray, z: np.ndarray, kx: ArrayLike,
-            ky: np.ndarray, kz: np.ndarray, s: np.ndarray, meridional: bool) -> np.ndarray:
-    """Solve z + s k_z = sag(r^2(s)) by Newton from ``s``; NaN where it does not converge."""
+            ky: np.ndarray, kz: np.ndarray, s: np.ndarray, meridional: bool
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Solve z + s k_z = sag(r^2(s)) by Newton from ``s``.
+
+    :return: s (NaN where it does not converge), and r^2, the sag and dz/du where the last
+        step was computed (within INTERSECT_TOLERANCE_MM of s).
+    """
     s = np.array(s, dtype=float)
     converged = np.zeros(s.shape, dtype=bool)
+    u = height = slope = s
     for _ in range(MAX_NEWTON_ITERATIONS):
         py = y + s * ky
         if meridional:
@@ -235,12 +249,13 @@ def _newton(surface: SurfaceShape, x: ArrayLike, y: np.ndarray, z: np.ndarray, k
             du = 2.0 * (px * kx + py * ky)
         height, slope = _sag_and_slope(surface, u)
         step = (z + s * kz - height) / (kz - slope * du)
-        step = np.where(converged, 0.0, step)
+        step[converged] = 0.0
         s = s - step
-        converged |= np.abs(step) <= INTERSECT_TOLERANCE_MM
-        if converged.all() or not np.isfinite(step[~converged]).any():
-            break
-    return np.where(converged, s, np.nan)
+        small = np.abs(step) <= INTERSECT_TOLERANCE_MM
+        converged |= small
+        if (small | np.isnan(step)).all():
+            break       # every ray converged or failed (NaN: outside the domain)
+    return np.where(converged, s, np.nan), u, height, slope
 
 
 def refract(kx: ArrayLike, ky: ArrayLike, kz: ArrayLike, nx: ArrayLike, ny: ArrayLike,
