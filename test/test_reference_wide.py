@@ -8,7 +8,7 @@ The reference is ``test/data/optiland_wide_reference.json``, written by
 requirements-reference.txt and is not installed by ``make test``). For every design it holds
 the prescription (also as ``lens.surfaces.*`` parameter values), optiland's paraxial data and
 the real chief-ray height on the paraxial focal plane at 97 field angles from the axis to the
-largest angle optiland's robust ray aiming reaches (up to 15 deg past the design field, and
+largest angle optiland's robust ray aiming reaches (up to 20 deg past the design field, and
 past 90 deg where the lens passes it), every chief ray aimed at the stop centre within 1e-9 mm.
 
 Asserted:
@@ -141,6 +141,8 @@ def test_provenance_and_coverage() -> None:
             lens['curve_end_deg'] < lens['fold_near_deg'] <= lens['optiland_reach_deg'], key
         assert lens['curve_end_deg'] >= lens['design_field_deg'], key
         assert curve['monotonic'] and np.all(np.diff(np.abs(curve['real_height_mm'])) > 0), key
+        # no ray runs backwards between two surfaces (optiland would follow it, a lens cannot)
+        assert curve['min_step_between_surfaces_mm'] >= -1e-9, key
         # optiland aimed every chief ray at the stop centre
         assert lens['aiming']['max_stop_residual_mm'] < 1e-9, key
         assert np.max(np.abs(curve['stop_height_mm'])) < 1e-9, key
@@ -210,13 +212,23 @@ def test_whole_field_curve(key: str, record_property: Any) -> None:
 
 
 @pytest.mark.skipif(ANGLE_TRACER is None, reason=ANGLE_REASON)
-def test_fisheye_reaches_past_90_degrees() -> None:
-    """Both optiland and our trace follow the fisheye's chief rays beyond 90 deg."""
+def test_fisheye_field_ends_where_its_surfaces_cross() -> None:
+    """
+    Both tracers follow the fisheye past 90 deg and end its field at the same angle.
+
+    Without clear apertures the field ends where the chief ray would have to run backwards
+    from the first element's rear surface to the second element's front one (the two
+    surfaces cross at that height): optiland's end (refined to 0.02 deg) and ours agree.
+    """
     lens = LENSES['fisheye_170']
     assert lens['optiland_reach_deg'] > 90.0
-    angles = np.asarray(lens['curve']['field_angle_deg'])
-    ours = traced(prescription_of(lens, clear_apertures=False), angles[angles > 90.0])
-    assert np.all(np.isfinite(ours))
+    assert 'the surfaces cross' in lens['reach_end']
+    p = prescription_of(lens, clear_apertures=False)
+    angles = np.arange(0.0, lens['optiland_reach_deg'] + 1.0, 0.005)
+    ours = traced(p, angles)
+    end = float(angles[np.isfinite(ours)][-1])
+    assert np.all(np.isfinite(ours[angles <= lens['optiland_reach_deg']]))
+    assert abs(end - lens['optiland_reach_deg']) < 0.03
 
 
 @pytest.mark.skipif(ANGLE_TRACER is None, reason=ANGLE_REASON)
@@ -338,11 +350,12 @@ def test_live_optiland_recheck(generator: Any, key: str) -> None:
 
 
 @pytest.mark.skipif(ANGLE_TRACER is None, reason=ANGLE_REASON)
-@pytest.mark.parametrize('key', ['wide_angle_160', 'fisheye_170'],
-                         ids=['wide_angle_160', 'fisheye_170'])
+@pytest.mark.parametrize('key', ['wide_angle_160'], ids=['wide_angle_160'])
 def test_live_optiland_confirms_our_rays_past_its_reach(generator: Any, key: str) -> None:
     """
     Past the reach of optiland's aimer, optiland traces our aimed chief rays to our heights.
+
+    optiland's robust aimer gives up on the wide-angle lens at 95.6 deg; our field goes on.
 
     Our object-space chief rays (the ends of our field, clear apertures opened) are launched in
     optiland as they are, 200 mm back along themselves: they cross optiland's stop at its centre

@@ -56,7 +56,7 @@ Sag z = c r^2 / (1 + sqrt(1 - (1 + k) c^2 r^2)) + a4 r^4 + ... + a16 r^16 (optil
 surface (``prescription.stop_surface``, ``lens.stop_surface``). Chief rays are aimed with
 optiland's ``'robust'`` aimer (the ``'iterative'`` one is a cross-check where it converges)
 and parametrised by their object-space field angle, 97 samples from 0 to the largest angle
-optiland traces (searched up to 15 deg past the design field; past 90 deg for the fisheye),
+optiland traces (searched up to 20 deg past the design field; past 90 deg for the fisheye),
 or to just before the real height folds back. Clear semi-diameters are the largest heights
 of real chief and meridional marginal rays over the design field, rounded up to 1 um.
 
@@ -287,11 +287,18 @@ def trace_chief(lens, hx: np.ndarray, hy: np.ndarray, mode: str = 'iterative',
         return np.array(getattr(surfaces[i], name), dtype=float).reshape(-1)
 
     stop = lens.surfaces.stop_index
+    # path length from each surface to the next along the ray: < 0 when the ray has to run
+    # backwards to reach the next surface (the two surfaces cross at that height)
+    points = np.array([[at(i, 'x'), at(i, 'y'), at(i, 'z')] for i in range(len(surfaces))])
+    dirs = np.array([[at(i, 'L'), at(i, 'M'), at(i, 'N')] for i in range(len(surfaces))])
+    steps = np.einsum('skn,skn->sn', np.diff(points, axis=0), dirs[:-1])
     out = {
         'x_img': np.array(rays.x, dtype=float), 'y_img': np.array(rays.y, dtype=float),
         'x_stop': at(stop, 'x'), 'y_stop': at(stop, 'y'),
         'x0': at(0, 'x'), 'y0': at(0, 'y'), 'M0': at(0, 'M'), 'N0': at(0, 'N'),
         'r_surf': np.array([np.hypot(at(i, 'x'), at(i, 'y')) for i in range(len(surfaces))]),
+        'min_step_mm': steps[1:].min(axis=0),
+        'steps': steps,
     }
     return out
 
@@ -563,7 +570,7 @@ ASPHERE_ORDERS = (4, 6, 8, 10, 12, 14, 16)
 #: Samples of each whole-field curve, uniform in field angle from 0 to optiland's reach.
 WIDE_CURVE_SAMPLES = 97
 #: optiland's reach is searched up to the design half-field plus this, deg.
-REACH_MARGIN_DEG = 15.0
+REACH_MARGIN_DEG = 20.0
 #: Resolution of the reach search, deg.
 REACH_RESOLUTION_DEG = 0.02
 #: Field angles whose clear semi-diameters are measured (fractions of the design field).
@@ -707,38 +714,93 @@ WIDE_DESIGNS = (
 )
 
 
-def _chief_ok(lens, angle_deg: float, field_max: float, wavelength_um: float) -> bool:
-    """Return whether optiland's robust aimer puts a chief ray at this angle on the image."""
+def _trace_one(lens, angle_deg: float, wavelength_um: float) -> dict | None:
+    """
+    Trace one chief ray with optiland's robust aimer; None when optiland cannot.
+
+    Refused or unaimed rays, a stop residual above 1e-9 mm, or a path that runs backwards
+    from one surface to the next (the surfaces cross at that height: optiland follows such a
+    ray, a lens cannot) all count as failures.
+    """
+    return _trace_why(lens, angle_deg, wavelength_um)[0]
+
+
+def _trace_why(lens, angle_deg: float, wavelength_um: float) -> tuple[dict | None, str]:
+    """Return ``_trace_one``'s trace (or None) and why it failed ('' when it did not)."""
+    field_max = float(lens.fields.max_field)
     try:
         r = trace_chief(lens, np.zeros(1), np.array([-angle_deg / field_max]), 'robust',
                         wavelength_um)
-    except Exception:                            # optiland refuses or fails to aim
-        return False
-    return bool(np.isfinite(r['y_img'][0]) and abs(r['y_stop'][0]) < 1e-9)
+    except Exception as err:                     # optiland refuses or fails to aim
+        return None, f'optiland: {type(err).__name__}: {err}'[:200]
+    if not np.isfinite(r['y_img'][0]):
+        return None, 'optiland loses the ray (NaN)'
+    if abs(r['y_stop'][0]) >= 1e-9:
+        return None, f'the aimed ray misses the stop centre by {abs(r["y_stop"][0]):.2g} mm'
+    if r['min_step_mm'][0] < -1e-9:
+        surfaces = np.flatnonzero(r['steps'][1:, 0] < -1e-9) + 1
+        return None, (f'the ray runs {-r["min_step_mm"][0]:.2g} mm backwards from optiland '
+                      f'surface {surfaces[0]} to {surfaces[0] + 1}: the surfaces cross')
+    return r, ''
 
 
-def optiland_reach(lens, design_deg: float, cap_deg: float, wavelength_um: float) -> float:
+def wide_scan(lens, design_deg: float, cap_deg: float, wavelength_um: float) -> dict:
     """
-    Return the largest field angle (deg, <= ``cap_deg``) optiland traces a chief ray at.
+    Trace chief rays one by one from the axis to ``cap_deg`` and find where the field ends.
 
-    Bisection between the design field (which must trace) and the cap, to
-    ``REACH_RESOLUTION_DEG``; 90 deg itself is avoided (optiland refuses tan(90 deg)).
+    ``WIDE_CURVE_SAMPLES`` angles from 0 to the cap, each traced alone (one failure must not
+    take a batch with it); the end of optiland's reach is refined by bisection between the
+    last traced sample and the next to ``REACH_RESOLUTION_DEG``. Where the real height folds
+    back the curve ends at the sample before the fold.
+
+    :return: dict: angles, the traces kept (in order), reach, fold, the angles optiland failed
+        at inside its reach
     """
-    field_max = float(lens.fields.max_field)
-    if not _chief_ok(lens, design_deg, field_max, wavelength_um):
-        raise RuntimeError(f'optiland does not trace the design field {design_deg} deg')
-    if _chief_ok(lens, cap_deg, field_max, wavelength_um):
-        return cap_deg
-    lo, hi = design_deg, cap_deg
-    while hi - lo > REACH_RESOLUTION_DEG:
-        mid = 0.5 * (lo + hi)
-        if abs(mid - 90.0) < 1e-3:
-            mid = 90.0 + 2e-3
-        if _chief_ok(lens, mid, field_max, wavelength_um):
-            lo = mid
-        else:
-            hi = mid
-    return lo
+    angles = list(_curve_angles(cap_deg))
+    traces = [_trace_one(lens, a, wavelength_um) for a in angles]
+    ok = [t is not None for t in traces]
+    if not all(o for a, o in zip(angles, ok) if a <= design_deg):
+        bad = [a for a, o in zip(angles, ok) if a <= design_deg and not o]
+        raise RuntimeError(f'optiland does not trace the design field (fails at {bad})')
+    last = max(i for i, o in enumerate(ok) if o)
+    if last + 1 < len(angles):
+        lo, hi = angles[last], angles[last + 1]
+        best = None
+        while hi - lo > REACH_RESOLUTION_DEG:
+            mid = 0.5 * (lo + hi)
+            if abs(mid - 90.0) < 1e-3:
+                mid = 90.0 + 2e-3
+            trace = _trace_one(lens, mid, wavelength_um)
+            if trace is None:
+                hi = mid
+            else:
+                lo, best = mid, trace
+        if best is not None:
+            angles.insert(last + 1, lo)
+            traces.insert(last + 1, best)
+            ok.insert(last + 1, True)
+            last += 1
+    reach = angles[last]
+    beyond = (angles[last + 1] if last + 1 < len(angles) else None)
+    if beyond is not None and abs(beyond - reach) <= REACH_RESOLUTION_DEG:
+        why = _trace_why(lens, beyond, wavelength_um)[1]
+    else:                                        # the bisection's last failure
+        why = '' if beyond is None else _trace_why(lens, min(beyond, reach + REACH_RESOLUTION_DEG),
+                                                   wavelength_um)[1]
+    kept = [i for i in range(last + 1) if ok[i]]
+    height = np.abs([traces[i]['y_img'][0] for i in kept])
+    fold = None
+    drop = np.flatnonzero(np.diff(height) <= 0.0)
+    if drop.size:
+        # the real height folds back (a field point imaged twice): the valid field ends
+        # before the fold, so the curve does too (its last sample before the maximum)
+        fold = angles[kept[drop[0]]]
+        kept = kept[:drop[0]]
+    end = angles[kept[-1]]
+    return {'angles': np.array([angles[i] for i in kept]),
+            'traces': [traces[i] for i in kept], 'reach': reach, 'fold': fold,
+            'reach_end': why if why else f'the search cap ({cap_deg} deg)',
+            'failed_inside': [float(a) for a, o in zip(angles, ok) if not o and a < end]}
 
 
 def clear_semi_diameters(lens, design_deg: float, wavelength_um: float) -> list[float]:
@@ -772,23 +834,21 @@ def _curve_angles(end_deg: float) -> np.ndarray:
     return angles
 
 
-def wide_curve(lens, angles: np.ndarray, wavelength_um: float, pixel_um: float) -> tuple:
+def wide_curve(lens, scan: dict, wavelength_um: float, pixel_um: float) -> tuple:
     """
-    Trace the whole-field curve by field angle (robust aiming), cross-check iterative aiming.
+    Return the whole-field curve of a scan (robust aiming), cross-checked by iterative aiming.
 
     :return: (curve dict, aiming dict)
     """
-    field_max = float(lens.fields.max_field)
-    hy = -angles / field_max                     # object at +y, as for the other lenses
-    zeros = np.zeros_like(hy)
-    rb = trace_chief(lens, zeros, hy, 'robust', wavelength_um)
+    rb = {key: np.concatenate([t[key] for t in scan['traces']])
+          for key in ('y_img', 'x_stop', 'y_stop', 'M0', 'N0', 'min_step_mm')}
+    rb['r_surf'] = np.concatenate([t['r_surf'] for t in scan['traces']], axis=1)
+    angles = scan['angles']
     launched = np.degrees(np.arctan2(-rb['M0'], rb['N0']))
     if not np.allclose(launched, angles, rtol=0, atol=1e-9):
         raise RuntimeError('optiland launched other fields than requested')
     pix_mm = pixel_um * 1e-3
     height = rb['y_img']
-    if not np.all(np.isfinite(height)):
-        raise RuntimeError('optiland lost a chief ray inside its reach')
     with np.errstate(divide='ignore', invalid='ignore'):
         tan = np.where(np.abs(launched) < 89.0, np.tan(np.radians(launched)), np.nan)
     curve = {
@@ -799,15 +859,19 @@ def wide_curve(lens, angles: np.ndarray, wavelength_um: float, pixel_um: float) 
         'real_height_abs_mm': lst(np.abs(height)),
         'stop_height_mm': lst(rb['y_stop']),
         'max_chief_height_at_optiland_surface_mm': lst(rb['r_surf'][1:-1].max(axis=1)),
+        'min_step_between_surfaces_mm': float(np.min(rb['min_step_mm'])),
         'monotonic': bool(np.all(np.diff(np.abs(height)) > 0.0)),
     }
     aiming: dict[str, Any] = {
         'mode': 'robust', 'tol_mm': AIM_TOL_MM, 'max_iter': AIM_MAX_ITER,
         'max_stop_residual_mm': float(np.max(np.hypot(rb['x_stop'], rb['y_stop']))),
+        'robust_failed_at_deg': scan['failed_inside'],
         'pixel_um': pixel_um,
     }
+    field_max = float(lens.fields.max_field)
+    hy = -angles / field_max
     try:
-        it = trace_chief(lens, zeros, hy, 'iterative', wavelength_um)
+        it = trace_chief(lens, np.zeros_like(hy), hy, 'iterative', wavelength_um)
         good = np.isfinite(it['y_img']) & (np.hypot(it['x_stop'], it['y_stop']) < 1e-9)
         aiming['iterative_converged_fields'] = int(np.sum(good))
         aiming['iterative_minus_robust_max_abs_px'] = (
@@ -862,24 +926,13 @@ def wide_entry(spec: tuple) -> dict[str, Any]:
     lens.updater.update_paraxial()
     sens = sensor_info(sensor)
     t0 = time.monotonic()
-    reach = optiland_reach(lens, design_deg, cap, wavelength_um)
+    scan = wide_scan(lens, design_deg, cap, wavelength_um)
+    reach, fold = scan['reach'], scan['fold']
     log(f'{key}: optiland reaches {reach:.2f} deg (design {design_deg} deg, searched to '
-        f'{cap} deg) in {time.monotonic() - t0:.1f} s')
-    curve, aiming = wide_curve(lens, _curve_angles(reach), wavelength_um,
-                               sens['tolerance_pixel_um'])
-    fold = None
-    if not curve['monotonic']:
-        # the real height folds back (a field point imaged twice): the valid field ends
-        # before the fold, so the curve does too (its last sample before the maximum)
-        height = np.abs(curve['real_height_mm'])
-        first_drop = int(np.argmax(np.diff(height) <= 0.0))
-        fold = curve['field_angle_deg'][first_drop]
-        end = curve['field_angle_deg'][first_drop - 1]
-        log(f'{key}: the real height folds near {fold:.2f} deg: the curve ends at {end:.2f} deg')
-        curve, aiming = wide_curve(lens, _curve_angles(end), wavelength_um,
-                                   sens['tolerance_pixel_um'])
-        if not curve['monotonic']:
-            raise RuntimeError(f'{key}: the curve still folds')
+        f'{cap} deg; failed at {len(scan["failed_inside"])} samples inside)'
+        + ('' if fold is None else f', the real height folds near {fold:.2f} deg')
+        + f' in {time.monotonic() - t0:.1f} s')
+    curve, aiming = wide_curve(lens, scan, wavelength_um, sens['tolerance_pixel_um'])
     semi = clear_semi_diameters(lens, design_deg, wavelength_um)
     heights = curve['max_chief_height_at_optiland_surface_mm']
     presc = our_surfaces(rows, semi)
@@ -899,6 +952,7 @@ def wide_entry(spec: tuple) -> dict[str, Any]:
         'design_field_deg': design_deg,
         'optiland_reach_deg': reach,
         'reach_searched_to_deg': cap,
+        'reach_end': scan['reach_end'],
         'fold_near_deg': fold,
         'curve_end_deg': curve['field_angle_deg'][-1],
         'aperture': {'type': aperture[0], 'value': aperture[1]},
