@@ -7,9 +7,10 @@ The reference is ``test/data/optiland_wide_reference.json``, written by
 ``tools/make_optiland_reference.py --only wide`` (optiland is pinned in
 requirements-reference.txt and is not installed by ``make test``). For every design it holds
 the prescription (also as ``lens.surfaces.*`` parameter values), optiland's paraxial data and
-the real chief-ray height on the paraxial focal plane at 97 field angles from the axis to the
-largest angle optiland's robust ray aiming reaches (up to 20 deg past the design field, and
-past 90 deg where the lens passes it), every chief ray aimed at the stop centre within 1e-9 mm.
+the real chief-ray height on the paraxial focal plane at up to 97 field angles from the axis
+to the largest angle optiland's robust ray aiming reaches (searched to 20 deg past the design
+field; past 90 deg for the fisheye) or to the fold of the real height, every chief ray aimed
+at the stop centre within 1e-9 mm.
 
 Asserted:
 

@@ -55,10 +55,12 @@ Sag z = c r^2 / (1 + sqrt(1 - (1 + k) c^2 r^2)) + a4 r^4 + ... + a16 r^16 (optil
 ``even_asphere`` with coefficients [0, a4, ..., a16]). The flat stop surface is kept as a
 surface (``prescription.stop_surface``, ``lens.stop_surface``). Chief rays are aimed with
 optiland's ``'robust'`` aimer (the ``'iterative'`` one is a cross-check where it converges)
-and parametrised by their object-space field angle, 97 samples from 0 to the largest angle
-optiland traces (searched up to 20 deg past the design field; past 90 deg for the fisheye),
-or to just before the real height folds back. Clear semi-diameters are the largest heights
-of real chief and meridional marginal rays over the design field, rounded up to 1 um.
+and parametrised by their object-space field angle: 97 samples from 0 to 20 deg past the
+design field, each traced alone, kept up to the largest angle optiland traces (refined to
+0.02 deg; a ray that would run backwards from one surface to the next, where two surfaces
+cross, does not count) or to just before the real height folds back; why the reach ends is
+recorded. Clear semi-diameters are the largest heights of real chief and meridional marginal
+rays over the design field, rounded up to 1 um.
 
 Signs: the object point lies at +y (finite: height Y > 0; infinity: the chief ray arrives
 travelling towards -y, i.e. optiland's angle field -Hy), ``tan_field`` = its tangent seen from
