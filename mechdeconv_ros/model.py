@@ -53,8 +53,7 @@ from mechdeconv_ros.optics import biconvex_for_focal_length, propagate_sigma, th
 from mechdeconv_ros.params import (
     ASPHERE_POWERS, check_values, INTERPOLATIONS, MAX_FRAME_PIXELS, ParamValue)
 from mechdeconv_ros.raytrace import (
-    image_plane, paraxial, Prescription, Surface, trace_chief_rays, trace_field_angles,
-    vertex_z)
+    image_plane, paraxial, Prescription, Surface, trace_field, trace_field_angles, vertex_z)
 from mechdeconv_ros.surfaces import domain_limit_mm
 import numpy as np
 import numpy.typing as npt
@@ -114,6 +113,7 @@ class RadialMap:
     real_mm: FloatArray
     field_angle_rad: FloatArray | None = None
     folded: bool = False
+    aim_offsets: FloatArray | None = None
 
     @property
     def valid_ideal_mm(self) -> float:
@@ -443,20 +443,22 @@ def _image_size(values: Mapping[str, Any], width: int, height: int) -> tuple[int
 
 
 def _trace_curve(prescription: Prescription, distance: float, sensor_z: float, v: float,
-                 ideal_max_mm: float, samples: int, projection: str = 'pinhole') -> RadialMap:
+                 ideal_max_mm: float, samples: int, projection: str = 'pinhole',
+                 guide: RadialMap | None = None) -> RadialMap:
     """
     Trace ``samples`` chief rays from 0 to ``ideal_max_mm`` and keep the valid prefix.
 
     The ideal heights are uniform in the projection: v tan(theta) for ``pinhole``, v theta for
-    ``equidistant`` (which reaches past 90 deg for a scene at infinity).
+    ``equidistant`` (which reaches past 90 deg for a scene at infinity). A ``guide`` (an
+    earlier curve of the same lens and scene) starts the ray aiming from its solutions.
     """
     ideal = np.linspace(0.0, ideal_max_mm, samples)
-    if projection == 'pinhole':
-        real = -trace_chief_rays(prescription, distance, sensor_z, ideal / v)
-        theta = np.arctan(ideal / v)
-    else:
-        theta = ideal / v
-        real = -trace_field_angles(prescription, distance, sensor_z, theta)
+    theta = np.arctan(ideal / v) if projection == 'pinhole' else ideal / v
+    known = None
+    if guide is not None and guide.aim_offsets is not None:
+        known = (guide.field_angle_rad, guide.aim_offsets)
+    real, offsets = trace_field(prescription, distance, sensor_z, theta, known)
+    real = -real
     good = np.isfinite(real)
     rising = np.ones_like(good)
     rising[1:] = np.diff(real) > 0.0
@@ -464,7 +466,7 @@ def _trace_curve(prescription: Prescription, distance: float, sensor_z: float, v
     # The valid field is the prefix up to the first failed ray or the first non-increase.
     end = int(np.argmin(good)) if not good.all() else samples
     folded = end < samples and bool(np.isfinite(real[end])) and not rising[end]
-    return RadialMap(ideal[:end], real[:end], theta[:end], folded)
+    return RadialMap(ideal[:end], real[:end], theta[:end], folded, offsets[:end])
 
 
 def _projected(theta: FloatArray, projection: str) -> FloatArray:
@@ -788,7 +790,8 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0) -> L
     out_corner = math.hypot(ow / 2.0 / (k * fx), oh / 2.0 / (k * fy)) * v
     raw_corner_ideal = float(np.nanmax(ratio * b_real)) * v
     reach = min(1.02 * max(out_corner, raw_corner_ideal), disk * v * 1.001)
-    curve = _trace_curve(prescription, distance, sensor_z, v, reach, CURVE_SAMPLES, projection)
+    curve = _trace_curve(prescription, distance, sensor_z, v, reach, CURVE_SAMPLES, projection,
+                         coarse)
 
     fits = fit_equivalent(coarse, v, K, w, h)
     chosen = choose_equivalent(fits)
