@@ -61,6 +61,9 @@ import yaml
 
 FloatArray = npt.NDArray[np.float64]
 
+#: Samples of the angle-uniform trace that finds the field, K_new and the equivalent
+#: calibration (its linear interpolation is good to ~1e-7 rad; it also guides the dense trace).
+COARSE_SAMPLES = 512
 #: Samples of the radial map (at least 1024 from 0 to past the output corner: docs/design.md
 #: section 2.5).
 CURVE_SAMPLES = 2048
@@ -636,19 +639,31 @@ def _fit_model(name: str, theta: FloatArray, target: FloatArray,
     weights = np.ones(theta.size)
     row_scale = np.ones(theta.size)
     best, best_error = None, math.inf
+    ridge = 0.0
     for _ in range(LAWSON_PASSES):
         w = np.sqrt(weights) * row_scale * scale
-        coef, *_ = np.linalg.lstsq(basis * w[:, None], rhs * w, rcond=None)
+        matrix = basis * w[:, None]
+        while True:
+            coef = _ridge_lstsq(matrix, rhs * w, ridge * float(np.sum(w * w)))
+            if name != 'rational_polynomial':
+                break
+            den = 1.0 + powers @ (coef[3:] / norms[3:])
+            if np.all(den > 0) or ridge >= 1e-2:
+                break
+            # A pole inside the field: the equation-error fit is ill-conditioned here;
+            # damp it (ridge regression) until the denominator stays positive.
+            ridge = max(100.0 * ridge, 1e-12)
         if not np.all(np.isfinite(coef)):
             break
         if name == 'rational_polynomial':
-            den = 1.0 + powers @ (coef[3:] / norms[3:])
             if not np.all(den > 0):
                 break
             row_scale = 1.0 / den
+            # Reweighted by 1/den the fit is better conditioned: relax the damping again.
+            ridge = ridge / 100.0 if ridge > 1e-12 else 0.0
         residual = np.abs(basis @ coef - rhs) * row_scale
         worst = float(np.max(residual))
-        if worst * scale <= 0.5 * EQUIVALENT_MAX_ERROR_PX:
+        if worst * scale <= 0.1 * EQUIVALENT_MAX_ERROR_PX:
             best = coef / norms
             break       # well within the bound: the minimax refinement is not needed
         if worst < best_error:
@@ -670,6 +685,15 @@ def _fit_model(name: str, theta: FloatArray, target: FloatArray,
     if name == 'rational_polynomial':
         return (c[0], c[1], 0.0, 0.0, c[2], c[3], c[4], c[5])
     return tuple(c)
+
+
+def _ridge_lstsq(matrix: FloatArray, rhs: FloatArray, damping: float) -> FloatArray:
+    """Solve min |A x - b|^2 + damping |x|^2 (plain least squares for damping 0)."""
+    if damping > 0.0:
+        size = matrix.shape[1]
+        matrix = np.vstack([matrix, math.sqrt(damping) * np.eye(size)])
+        rhs = np.concatenate([rhs, np.zeros(size)])
+    return np.linalg.lstsq(matrix, rhs, rcond=None)[0]
 
 
 def choose_equivalent(fits: list[EquivalentFit]) -> EquivalentFit:
@@ -757,9 +781,9 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0) -> L
     edge_real = math.hypot(w / 2.0 * px, h / 2.0 * py)
     theta_max = min(cap, 1.5 * edge_real / v)
     for _ in range(12):
-        coarse = _trace_curve(prescription, distance, sensor_z, v, theta_max * v, 1024,
+        coarse = _trace_curve(prescription, distance, sensor_z, v, theta_max * v, COARSE_SAMPLES,
                               'equidistant')
-        if (coarse.ideal_mm.size < 1024 or coarse.valid_real_mm >= 1.05 * edge_real
+        if (coarse.ideal_mm.size < COARSE_SAMPLES or coarse.valid_real_mm >= 1.05 * edge_real
                 or theta_max >= cap):
             break
         theta_max = min(cap, 2.0 * theta_max)
@@ -974,7 +998,7 @@ def _full_field(model: LensModel) -> dict[str, Any]:
     theta, real, folded = curve.field_angle_rad, curve.real_mm, curve.folded
     distance = _scene_distance(model.values)
     cap = _field_cap_rad(distance)
-    if curve.ideal_mm.size == 1024 and curve.max_field_angle_rad < cap:
+    if curve.ideal_mm.size == COARSE_SAMPLES and curve.max_field_angle_rad < cap:
         sensor_z, _ = image_plane(model.prescription, distance)
         grid = np.linspace(0.0, cap, FULL_FIELD_SAMPLES)
         traced = _trace_angles(model, sensor_z, grid)
