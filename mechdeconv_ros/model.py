@@ -472,6 +472,52 @@ def _trace_curve(prescription: Prescription, distance: float, sensor_z: float, v
     return RadialMap(ideal[:end], real[:end], theta[:end], folded, offsets[:end])
 
 
+def _resample(field: RadialMap, v: float, ideal_max_mm: float, samples: int,
+              projection: str) -> RadialMap:
+    """
+    Return the radial map in a projection, uniform in its ideal height, from the field trace.
+
+    The real heights at the new field angles are the cubic Hermite interpolation of the
+    angle-uniform trace, with slopes from fourth-order differences: on every lens we tried
+    (Case 2 to 4000x3000 px, aspheric double Gauss, fisheyes to 102 deg) within 2e-7 px of
+    tracing those angles exactly, at a quarter of the cost (the map needs no more rays).
+    """
+    ideal = np.linspace(0.0, ideal_max_mm, samples)
+    theta = np.arctan(ideal / v) if projection == 'pinhole' else ideal / v
+    inside = theta <= field.max_field_angle_rad
+    real = np.full(samples, np.nan)
+    real[inside] = hermite(field.field_angle_rad, field.real_mm, theta[inside])
+    good = np.isfinite(real)
+    good[1:] &= np.diff(real) > 0.0
+    end = int(np.argmin(good)) if not good.all() else samples
+    return RadialMap(ideal[:end], real[:end], theta[:end], field.folded and end == samples)
+
+
+def hermite(x: FloatArray, y: FloatArray, query: FloatArray) -> FloatArray:
+    """
+    Interpolate uniformly spaced samples by cubic Hermite with fourth-order slopes.
+
+    :param x: uniformly spaced abscissae (at least 5), increasing.
+    :param y: values.
+    :param query: where to interpolate, within ``[x[0], x[-1]]``.
+    :return: the interpolated values (error O(h^4)).
+    """
+    h = float(x[1] - x[0])
+    n = y.size
+    d = np.empty(n)
+    d[2:-2] = (y[:-4] - 8.0 * y[1:-3] + 8.0 * y[3:-1] - y[4:]) / (12.0 * h)
+    d[0] = (-25.0 * y[0] + 48.0 * y[1] - 36.0 * y[2] + 16.0 * y[3] - 3.0 * y[4]) / (12.0 * h)
+    d[1] = (-3.0 * y[0] - 10.0 * y[1] + 18.0 * y[2] - 6.0 * y[3] + y[4]) / (12.0 * h)
+    d[-1] = (25.0 * y[-1] - 48.0 * y[-2] + 36.0 * y[-3] - 16.0 * y[-4] + 3.0 * y[-5]) / (12.0 * h)
+    d[-2] = (3.0 * y[-1] + 10.0 * y[-2] - 18.0 * y[-3] + 6.0 * y[-4] - y[-5]) / (12.0 * h)
+    k = np.clip(((query - x[0]) / h).astype(np.int64), 0, n - 2)
+    t = (query - x[k]) / h
+    t2 = t * t
+    t3 = t2 * t
+    return ((2.0 * t3 - 3.0 * t2 + 1.0) * y[k] + (t3 - 2.0 * t2 + t) * h * d[k]
+            + (3.0 * t2 - 2.0 * t3) * y[k + 1] + (t3 - t2) * h * d[k + 1])
+
+
 def _projected(theta: FloatArray, projection: str) -> FloatArray:
     """Return the normalised ideal radius of field angles: tan(theta) or theta."""
     if projection == 'pinhole':
@@ -814,8 +860,7 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0) -> L
     out_corner = math.hypot(ow / 2.0 / (k * fx), oh / 2.0 / (k * fy)) * v
     raw_corner_ideal = float(np.nanmax(ratio * b_real)) * v
     reach = min(1.02 * max(out_corner, raw_corner_ideal), disk * v * 1.001)
-    curve = _trace_curve(prescription, distance, sensor_z, v, reach, CURVE_SAMPLES, projection,
-                         coarse)
+    curve = _resample(coarse, v, reach, CURVE_SAMPLES, projection)
 
     fits = fit_equivalent(coarse, v, K, w, h)
     chosen = choose_equivalent(fits)
@@ -981,50 +1026,73 @@ def _summary(model: LensModel) -> dict[str, Any]:
     }
 
 
-#: Samples of the whole-field trace (the lens's own limit, for the report).
-FULL_FIELD_SAMPLES = 256
+#: Samples of the field traced beyond the sensor, to the lens's limit (for the report).
+BEYOND_SAMPLES = 128
 
 
 def _full_field(model: LensModel) -> dict[str, Any]:
     """
     Return the chief-ray curve over the whole field the lens passes, to its limit.
 
-    When the model's angle-uniform trace (``field_curve``) already ends inside its range (a
-    failed ray or a fold), that is the limit. Otherwise the field is traced from 0 to the cap
-    (179 deg at infinity, 89.5 deg for a finite scene), and the last interval refined 64
-    times, so the limit is known to about 0.01 deg.
+    The model's angle-uniform trace (``field_curve``) covers the sensor. When it ends inside
+    its range (a failed ray or a fold), the interval after its last sample is traced again 64
+    times finer; otherwise the field is traced on to the cap (179 deg at infinity, 89.5 deg
+    for a finite scene) and the interval where it ends refined likewise, so the limit is
+    known to about 1/64 of a sample step. Every trace starts its aiming from the solutions
+    already known (``guide``).
     """
     curve = model.field_curve
-    theta, real, folded = curve.field_angle_rad, curve.real_mm, curve.folded
     distance = _scene_distance(model.values)
     cap = _field_cap_rad(distance)
+    sensor_z, _ = image_plane(model.prescription, distance)
+    theta, real = curve.field_angle_rad, curve.real_mm
+    guide = curve
+    step = float(theta[1] - theta[0])
     if curve.ideal_mm.size == COARSE_SAMPLES and curve.max_field_angle_rad < cap:
-        sensor_z, _ = image_plane(model.prescription, distance)
-        grid = np.linspace(0.0, cap, FULL_FIELD_SAMPLES)
-        traced = _trace_angles(model, sensor_z, grid)
-        if traced.ideal_mm.size < FULL_FIELD_SAMPLES:
-            end = traced.ideal_mm.size
-            fine = np.concatenate((np.linspace(0.0, grid[end - 1], 64),
-                                   np.linspace(grid[end - 1], grid[end], 66)[1:]))
-            traced = _trace_angles(model, sensor_z, fine)
+        # The lens passes more than the sensor needs: trace on to the cap.
+        beyond = np.linspace(theta[-1], cap, BEYOND_SAMPLES + 1)[1:]
+        grid = np.concatenate((theta, beyond))
+        traced = _trace_angles(model, sensor_z, grid, guide)
         theta, real, folded = traced.field_angle_rad, traced.real_mm, traced.folded
+        guide = traced
+        if traced.ideal_mm.size == grid.size:
+            return _field_dict(theta, real, folded, cap)
+        step = float(grid[traced.ideal_mm.size] - theta[-1])
+    # Refine the last interval: where exactly the field ends.
+    fine = np.concatenate((theta[-4:], theta[-1] + step * np.arange(1, 65) / 64.0))
+    refined = _trace_angles(model, sensor_z, fine, guide)
+    if refined.ideal_mm.size > 4:
+        theta = np.concatenate((theta, refined.field_angle_rad[4:]))
+        real = np.concatenate((real, refined.real_mm[4:]))
+    folded = refined.folded or (refined.ideal_mm.size == fine.size and curve.folded)
+    return _field_dict(theta, real, folded, cap)
+
+
+def _field_dict(theta: FloatArray, real: FloatArray, folded: bool, cap: float
+                ) -> dict[str, Any]:
     return {'theta_rad': theta, 'real_mm': real, 'folded': folded,
             'max_field_angle_deg': math.degrees(float(theta[-1])),
             'at_cap': bool(theta[-1] >= cap * (1.0 - 1e-9)),
             'image_circle_radius_mm': float(real[-1])}
 
 
-def _trace_angles(model: LensModel, sensor_z: float, theta: FloatArray) -> RadialMap:
+def _trace_angles(model: LensModel, sensor_z: float, theta: FloatArray,
+                  guide: RadialMap | None = None) -> RadialMap:
     """Trace the chief rays of the field angles ``theta`` (increasing); keep the valid prefix."""
-    real = -trace_field_angles(model.prescription, _scene_distance(model.values), sensor_z,
-                               theta)
+    known = None
+    if guide is not None and guide.aim_offsets is not None:
+        known = (guide.field_angle_rad, guide.aim_offsets)
+    real, offsets = trace_field(model.prescription, _scene_distance(model.values), sensor_z,
+                                theta, known)
+    real = -real
     good = np.isfinite(real)
     rising = np.ones_like(good)
     rising[1:] = np.diff(real) > 0.0
     good &= rising
     end = int(np.argmin(good)) if not good.all() else theta.size
     folded = end < theta.size and bool(np.isfinite(real[end])) and not rising[end]
-    return RadialMap(theta[:end] * model.image_distance_mm, real[:end], theta[:end], folded)
+    return RadialMap(theta[:end] * model.image_distance_mm, real[:end], theta[:end], folded,
+                     offsets[:end])
 
 
 def _covered_field(model: LensModel, field: Mapping[str, Any]) -> dict[str, Any]:

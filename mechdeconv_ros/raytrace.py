@@ -95,16 +95,15 @@ MAX_AIM_ITERATIONS = 40
 MAX_STEP_HALVINGS = 20
 MAX_START_HALVINGS = 12
 STALL_ITERATIONS = 3
-#: Windows of ray aiming continued from solved neighbours (wide fields, see _aim_continued).
-CONTINUATION_PASSES = 64
 #: Step halvings of the first pass from the paraxial starts: a ray that needs more is aimed
 #: again by continuation from its solved neighbours (cheaper than halving on).
 FIRST_PASS_HALVINGS = 8
 FIRST_PASS_ITERATIONS = 12
 #: Largest window of samples aimed together by continuation.
-MAX_WINDOW = 64
-#: Shortest continuation step towards a sample, relative to its field (see _bridge).
-BRIDGE_MIN_STEP = 1e-4
+MAX_WINDOW = 32
+#: Shortest continuation step towards a sample, relative to the step from the last solved
+#: sample (three halvings; see _bridge).
+BRIDGE_MIN_FRACTION = 0.125
 #: Newton iterations and step halvings from an extrapolated start (it is close: few needed).
 CONTINUATION_ITERATIONS = 6
 CONTINUATION_HALVINGS = 5
@@ -656,15 +655,19 @@ def _aim_continued(problem: _ChiefRayProblem, field: np.ndarray,
         side = np.flatnonzero((field * sign > 0) & np.isfinite(field))
         order = side[np.argsort(np.abs(field[side]), kind='stable')]
         window = 8
-        for _ in range(CONTINUATION_PASSES):
+        # Every pass solves the frontier sample or ends the loop: at most one per sample.
+        for _ in range(order.size):
             solved = np.isfinite(height[order])
             first = int(np.argmin(solved)) if not solved.all() else order.size
             if first == order.size:
                 break
             # Two solved samples below the frontier (the axis ray h = 0 at field 0 counts).
             below = order[:first]
-            f0, h0 = (0.0, 0.0) if below.size < 2 else (field[below[-2]], height[below[-2]])
             f1, h1 = (0.0, 0.0) if below.size < 1 else (field[below[-1]], height[below[-1]])
+            # The solved sample before it at another field (repeated fields are common).
+            distinct = below[:-1][field[below[:-1]] != f1]
+            f0, h0 = ((0.0, 0.0) if distinct.size == 0
+                      else (field[distinct[-1]], height[distinct[-1]]))
             todo = order[first:first + window]
             todo = todo[~np.isfinite(height[todo])]
             if f1 == f0:
@@ -691,12 +694,12 @@ def _bridge(problem: _ChiefRayProblem, before: tuple[float, float],
 
     ``before`` and ``last`` are the two solved (field, offset) pairs below ``target``. A step
     that converges is taken and the next one tried at twice its length (up to the target);
-    one that fails is halved, down to BRIDGE_MIN_STEP of the field: there the branch of chief
-    rays ends (NaN).
+    one that fails is halved, down to BRIDGE_MIN_FRACTION of the first step: there the branch
+    of chief rays ends (NaN).
     """
     (f0, h0), (f1, h1) = before, last
     step = target - f1
-    minimum = BRIDGE_MIN_STEP * max(abs(target), 1e-3)
+    minimum = abs(step) * BRIDGE_MIN_FRACTION
     while abs(step) >= minimum:
         trial = min(f1 + step, target) if step > 0 else max(f1 + step, target)
         start = h1 if f1 == f0 else h1 + (h1 - h0) / (f1 - f0) * (trial - f1)
