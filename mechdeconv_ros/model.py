@@ -149,6 +149,9 @@ class LensModel:
     fit_rms_px: float
     max_displacement_px: float
     interpolation: int
+    #: Physically possible but unusual values (a stop far from the lens, f/0.7 or faster),
+    #: found while building; the summary's ``warnings`` start with them.
+    warnings: tuple[str, ...] = ()
     _summary_cache: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -470,9 +473,11 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0) -> L
         sensor_z, v = image_plane(prescription, distance)
     except ValueError as err:
         raise ModelError('scene.distance_mm', str(err)) from None
+    warnings = _check_physical(vals, prescription, para, distance, sensor_z)
     w, h, ow, oh = _image_size(vals, width, height)
     px = float(vals['sensor.pixel_size_x_um']) * 1e-3
     py = float(vals['sensor.pixel_size_y_um']) * 1e-3
+    _check_circle_of_confusion(vals, f, w * px, h * py)
     fx, fy = v / px, v / py
     K = np.array([[fx, 0.0, (w - 1) / 2.0], [0.0, fy, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
 
@@ -521,8 +526,281 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0) -> L
         out_height=oh, pixel_mm=(px, py), focal_length_mm=f, image_distance_mm=v, curve=curve,
         K=K, K_new=K_new, D=D, distortion_model=dist_model, fit_rms_px=rms,
         max_displacement_px=max_disp,
-        interpolation=CV_INTERPOLATION[str(vals['output.interpolation'])])
+        interpolation=CV_INTERPOLATION[str(vals['output.interpolation'])],
+        warnings=tuple(warnings))
     return model
+
+
+# ---------------------------------------------------------------------------------------------
+# Physical checks: a parameter set must describe a camera that can exist (docs/refusals.md)
+# ---------------------------------------------------------------------------------------------
+
+#: f-numbers below this are accepted with a warning (few production lenses are faster).
+FAST_F_NUMBER = 0.7
+#: A stop farther than this many focal lengths outside the lens is accepted with a warning.
+FAR_STOP_FOCAL_LENGTHS = 1.0
+#: Relative slack of the aperture and edge-thickness limits (rounding of given values).
+LIMIT_SLACK = 1e-9
+
+
+def _sag(radius_mm: float, height_mm: float) -> float:
+    """
+    Return the sagitta ``z(a) = r - sign(r) sqrt(r^2 - a^2)`` of a sphere at height ``a``.
+
+    A flat surface has none; beyond its hemisphere (``a > |r|``) a surface is continued by a
+    flat bevel at the hemisphere's rim, so the sagitta stays ``r`` there.
+    """
+    if radius_mm == 0.0:
+        return 0.0
+    a = min(abs(height_mm), abs(radius_mm))
+    return a * a / (radius_mm * (1.0 + math.sqrt(max(0.0, 1.0 - (a / radius_mm) ** 2))))
+
+
+def _paraxial_height(prescription: Prescription, h: float, u: float, z_end: float) -> float:
+    """
+    Return the height at the plane ``z_end`` of a paraxial ray.
+
+    The ray has height ``h`` at the first-vertex plane z = 0 and slope ``u`` in object space
+    (a line there, so ``z_end < 0`` is on it); transfers are ``y += d (n u) / n`` and
+    refractions ``n u -= (n' - n) c y`` at every vertex before ``z_end``.
+    """
+    index = prescription.object_index
+    y, nu, z = h, index * u, 0.0
+    if z_end <= 0.0:
+        return h + u * z_end
+    for z_vertex, surface, before in zip(vertex_z(prescription), prescription.surfaces,
+                                         range(len(prescription.surfaces))):
+        if z_vertex > z_end:
+            break
+        y += (float(z_vertex) - z) * nu / index
+        nu -= (surface.refractive_index - prescription.index_before(before)) \
+            * surface.curvature_per_mm * y
+        z, index = float(z_vertex), surface.refractive_index
+    return y + (z_end - z) * nu / index
+
+
+def _marginal_ray(prescription: Prescription, distance: float, front_principal_z: float
+                  ) -> tuple[float, float, str]:
+    """
+    Return the axial marginal ray ``(h, u)`` for an aperture of unit radius, and its datum.
+
+    ``lens.aperture_diameter_mm`` is the diameter of the axial beam in object space, the
+    entrance pupil diameter, as the f-number ``n_f = f / d_a`` counts it: the ray leaves the
+    axial scene point (or comes parallel from infinity) through the rim of the paraxial
+    entrance pupil (the stop imaged into object space). When the pupil is at infinity (an
+    object-side telecentric stop) the datum is the stop itself.
+
+    :return: height at z = 0, object-space slope, and ``'pupil'`` or ``'stop'``.
+    """
+    z_stop = prescription.stop_z_mm
+    a = _paraxial_height(prescription, 1.0, 0.0, z_stop)
+    b = _paraxial_height(prescription, 0.0, 1.0, z_stop)
+    if math.isinf(distance):
+        return 1.0, 0.0, 'pupil'
+    z_scene = front_principal_z - distance
+    if abs(a) > 1e-12 * max(1.0, abs(b)):
+        z_pupil = b / a
+        if abs(z_pupil - z_scene) > 1e-12 * max(1.0, abs(z_scene)):
+            u = 1.0 / (z_pupil - z_scene)
+            return -z_scene * u, u, 'pupil'
+    # Telecentric in object space: unit radius at the stop plane.
+    at_stop = _paraxial_height(prescription, -z_scene, 1.0, z_stop)
+    u = 1.0 / at_stop if at_stop != 0.0 else math.inf
+    return -z_scene * u, u, 'stop'
+
+
+def _elements(prescription: Prescription) -> list[list[int]]:
+    """
+    Return the glass elements: runs of surfaces joined by glass (index > 1 between them).
+
+    Surfaces with the same index on both sides refract nothing (dummy planes, such as a stop
+    inside the glass) and are left out.
+    """
+    out: list[list[int]] = []
+    current: list[int] = []
+    for i, surface in enumerate(prescription.surfaces):
+        if surface.refractive_index == prescription.index_before(i):
+            continue
+        current.append(i)
+        if surface.refractive_index == 1.0:
+            if len(current) > 1:
+                out.append(current)
+            current = []
+    return out
+
+
+def _edge_crossing(surfaces: tuple[Surface, ...], z_vertices: FloatArray, element: list[int],
+                   heights: list[float], d_a: float) -> tuple[int, int, float, float] | None:
+    """
+    Return where an element's surfaces cross at its clear semi-aperture, or None.
+
+    The clear semi-aperture ``a`` is the widest of the axial beam (``heights`` per unit
+    aperture radius times ``d_a / 2``) and the given semi-diameters on the element's surfaces;
+    the edge thickness between consecutive surfaces is ``z_j + sag_j(a) - z_i - sag_i(a)``.
+
+    :return: (i, j, edge thickness, a) of the first pair that crosses.
+    """
+    semi_aperture = max(max(heights[i] * d_a / 2.0 for i in element),
+                        max(surfaces[i].semi_diameter_mm for i in element))
+    for i, j in zip(element[:-1], element[1:]):
+        edge = (float(z_vertices[j]) + _sag(surfaces[j].radius_mm, semi_aperture)
+                - float(z_vertices[i]) - _sag(surfaces[i].radius_mm, semi_aperture))
+        if edge < -LIMIT_SLACK * max(1.0, semi_aperture):
+            return i, j, edge, semi_aperture
+    return None
+
+
+def _check_physical(vals: Mapping[str, Any], prescription: Prescription, para: Any,
+                    distance: float, sensor_z: float) -> list[str]:
+    """
+    Refuse a lens that cannot exist; return warnings for an unusual one.
+
+    The rules, each with its parameter, formula and limit, are listed in docs/refusals.md.
+
+    :raises ModelError: naming the parameter, why, and the limit.
+    :return: warnings about physically possible but unusual values.
+    """
+    f = para.efl_mm
+    prescription_mode = _is_prescription_mode(vals)
+    warnings: list[str] = []
+    # Focus distance: the same rules as the scene distance.
+    focus = float(vals['scene.focus_distance_mm'])
+    if focus > 0.0:
+        if focus <= f:
+            raise ModelError('scene.focus_distance_mm',
+                             f'{focus:g} mm is inside the focal length {f:.4g} mm: the lens '
+                             'cannot be focused there (it forms no real image of it; the '
+                             f'focus distance must be above {f:.4g} mm, or 0 = the scene '
+                             'distance)')
+        if para.front_principal_z_mm - focus >= 0.0:
+            raise ModelError('scene.focus_distance_mm',
+                             f'{focus:g} mm from the front principal plane puts the plane in '
+                             f'focus inside the lens (it must be above '
+                             f'{para.front_principal_z_mm:.4g} mm)')
+    # The image plane (the sensor) must lie behind the last surface, in air.
+    z_last = para.last_vertex_z_mm
+    if sensor_z <= z_last:
+        name = 'lens.surfaces.thickness_mm' if prescription_mode else 'lens.thickness_mm'
+        raise ModelError(name, f'the image plane falls at z = {sensor_z:.4g} mm, not behind '
+                               f'the last surface at z = {z_last:.4g} mm: the sensor would '
+                               'have to sit inside the lens (the back focal distance must be '
+                               'positive)')
+    # The stop: between the scene and the image plane.
+    z_stop = prescription.stop_z_mm
+    stop_name = _stop_param(vals)
+    if prescription_mode:
+        where = f'surface {int(vals["lens.stop_surface"])} at z = {z_stop:.4g} mm'
+    else:
+        where = f'{float(vals["lens.stop_offset_mm"]):g} mm puts the stop at z = {z_stop:.4g} mm'
+    if z_stop >= sensor_z:
+        limit = ('' if prescription_mode else
+                 f' (the offset must be above {para.front_principal_z_mm - sensor_z:.4g} mm)')
+        raise ModelError(stop_name, f'{where}, at or behind the image plane at z = '
+                                    f'{sensor_z:.4g} mm: no light reaches the sensor through '
+                                    f'an aperture behind it{limit}')
+    z_scene = para.front_principal_z_mm - distance
+    if z_stop <= z_scene:
+        limit = ('' if prescription_mode else
+                 f' (the offset must be below the scene distance {distance:g} mm)')
+        raise ModelError(stop_name, f'{where}, at or in front of the scene at z = '
+                                    f'{z_scene:.4g} mm: the aperture must lie between the '
+                                    f'scene and the lens{limit}')
+    # Clear apertures: a sphere is at most 2|r| wide; a given semi-diameter bounds its surface.
+    surfaces = prescription.surfaces
+    for i, surface in enumerate(surfaces):
+        radius, semi = surface.radius_mm, surface.semi_diameter_mm
+        if radius != 0.0 and semi > abs(radius) * (1.0 + LIMIT_SLACK):
+            raise ModelError('lens.surfaces.semi_diameter_mm',
+                             f'surface {i}: a clear semi-diameter of {semi:g} mm is wider than '
+                             f'a spherical surface of radius {radius:g} mm can be (at most '
+                             f'|r| = {abs(radius):g} mm, a hemisphere)')
+    d_a = float(vals['lens.aperture_diameter_mm'])
+    h, u, datum = _marginal_ray(prescription, distance, para.front_principal_z_mm)
+    if not math.isfinite(u):
+        raise ModelError(stop_name, f'{where} sits at an image of the scene (the axial beam '
+                                    'focuses there): it would bound the field, not the '
+                                    'aperture')
+    z_vertices = vertex_z(prescription)
+    # Beam heights per unit aperture radius (d_a / 2 = 1).
+    heights = [abs(_paraxial_height(prescription, h, u, float(z))) for z in z_vertices]
+    elements = _elements(prescription)
+    real = {i for element in elements for i in element}
+    bound, culprit, at = math.inf, '', 0
+    for i, surface in enumerate(surfaces):
+        radius, semi = surface.radius_mm, surface.semi_diameter_mm
+        if heights[i] <= 0.0:
+            continue
+        if i in real and radius != 0.0 and abs(radius) / heights[i] < bound:
+            bound, at = abs(radius) / heights[i], i
+            culprit = (f'the {2 * abs(radius):g} mm diameter (2|r|) of surface {i}, a '
+                       f'spherical surface of radius {radius:g} mm')
+        if semi > 0.0 and semi / heights[i] < bound:
+            bound, at = semi / heights[i], i
+            culprit = (f'the {2 * semi:g} mm clear diameter of surface {i} (2 x '
+                       f'lens.surfaces.semi_diameter_mm[{i}])')
+    if d_a / 2.0 > bound * (1.0 + LIMIT_SLACK):
+        beam = 'entrance pupil' if datum == 'pupil' else 'stop'
+        raise ModelError('lens.aperture_diameter_mm',
+                         f'{d_a:g} mm ({beam} diameter) is wider than the surfaces allow: its '
+                         f'axial beam is {d_a * heights[at]:.4g} mm wide at surface {at}, '
+                         f'wider than {culprit}; the largest aperture is '
+                         f'{2.0 * bound:.4g} mm (paraxial marginal ray)')
+    # Edge thickness of every glass element at its clear semi-aperture.
+    thickness_name = 'lens.surfaces.thickness_mm' if prescription_mode else 'lens.thickness_mm'
+    for element in elements:
+        crossing = _edge_crossing(surfaces, z_vertices, element, heights, d_a)
+        if crossing is None:
+            continue
+        i, j, edge, semi_aperture = crossing
+        centre = float(z_vertices[j] - z_vertices[i])
+        if _edge_crossing(surfaces, z_vertices, element, heights, 0.0) is not None:
+            smaller = 'the semi-diameters lens.surfaces.semi_diameter_mm smaller'
+        else:
+            lo, hi = 0.0, d_a   # the largest aperture with a non-negative edge, by bisection
+            for _ in range(60):
+                mid = 0.5 * (lo + hi)
+                lo, hi = (lo, mid) if _edge_crossing(surfaces, z_vertices, element, heights,
+                                                     mid) else (mid, hi)
+            smaller = f'lens.aperture_diameter_mm at most {lo:.4g} mm'
+        which = (f'between surfaces {i} and {j} ({centre:g} mm at the centre)'
+                 if prescription_mode else f'{centre:g} mm at the centre')
+        raise ModelError(thickness_name,
+                         f'the glass {which} has an edge thickness of {edge:.4g} mm at its '
+                         f'{semi_aperture:.4g} mm clear semi-aperture: its surfaces cross '
+                         f'(t - sag1(a) + sag2(a) < 0). It must be at least '
+                         f'{centre - edge:.4g} mm thick at the centre, or {smaller}')
+    # Unusual but possible: a stop far outside the lens, a very fast aperture.
+    outside = max(-z_stop, z_stop - z_last, 0.0)
+    if outside > FAR_STOP_FOCAL_LENGTHS * f:
+        side = 'in front of the first' if z_stop < 0.0 else 'behind the last'
+        warnings.append(f'{stop_name}: the stop is {outside:.4g} mm {side} surface, farther '
+                        f'than the focal length {f:.4g} mm: an unusual design (strong '
+                        'distortion and vignetting)')
+    n_f = constraints.f_number(f, d_a, float(vals['lens.exposure_constant_q']))
+    if n_f < FAST_F_NUMBER:
+        warnings.append(f'lens.aperture_diameter_mm: f/{n_f:.3g} is faster than '
+                        f'f/{FAST_F_NUMBER:g}; few real lenses are (f/0.5 is the limit of an '
+                        'aplanatic lens in air)')
+    return warnings
+
+
+def _check_circle_of_confusion(vals: Mapping[str, Any], f: float, width_mm: float,
+                               height_mm: float) -> None:
+    """
+    Refuse a circle of confusion larger than the sensor diagonal of the model's image size.
+
+    :raises ModelError: naming ``scene.circle_of_confusion_mm``.
+    """
+    c_set = float(vals['scene.circle_of_confusion_mm'])
+    c = constraints.circle_of_confusion_mm(f, c_set)
+    diagonal = math.hypot(width_mm, height_mm)
+    if c > diagonal * (1.0 + LIMIT_SLACK):
+        value = f'{c:g} mm' if c_set > 0.0 else f'0 (0.1 % of f = {c:.4g} mm)'
+        raise ModelError('scene.circle_of_confusion_mm',
+                         f'{value} is larger than the {diagonal:.4g} mm diagonal of the '
+                         f'{width_mm:.4g} x {height_mm:.4g} mm sensor: a blur wider than the '
+                         f'image defines no depth of field (it must be at most '
+                         f'{diagonal:.4g} mm)')
 
 
 def _lens_param(values: Mapping[str, Any]) -> str:
@@ -616,7 +894,7 @@ def _summary(model: LensModel) -> dict[str, Any]:
     focus = float(vals['scene.focus_distance_mm']) or distance
     focus = math.inf if focus == 0.0 else focus
     near, far = constraints.depth_of_field_mm(h, focus)
-    warnings = []
+    warnings = list(model.warnings)
     if not near <= distance <= far:
         warnings.append(f'scene distance {distance:g} mm is outside the depth of field '
                         f'[{near:.4g}, {far:.4g}] mm of the focus distance {focus:g} mm')
