@@ -762,10 +762,11 @@ def _check_physical(vals: Mapping[str, Any], prescription: Prescription, para: A
                 lo, hi = (lo, mid) if _edge_crossing(surfaces, z_vertices, element, heights,
                                                      mid) else (mid, hi)
             smaller = f'lens.aperture_diameter_mm at most {lo:.4g} mm'
-        which = (f'between surfaces {i} and {j} ({centre:g} mm at the centre)'
-                 if prescription_mode else f'{centre:g} mm at the centre')
+        which = (f'the glass between surfaces {i} and {j} ({centre:g} mm thick at the '
+                 'centre)' if prescription_mode else f'the lens ({centre:g} mm thick at the '
+                 'centre)')
         raise ModelError(thickness_name,
-                         f'the glass {which} has an edge thickness of {edge:.4g} mm at its '
+                         f'{which} has an edge thickness of {edge:.4g} mm at its '
                          f'{semi_aperture:.4g} mm clear semi-aperture: its surfaces cross '
                          f'(t - sag1(a) + sag2(a) < 0). It must be at least '
                          f'{centre - edge:.4g} mm thick at the centre, or {smaller}')
