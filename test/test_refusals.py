@@ -135,7 +135,7 @@ def test_semi_diameter_wider_than_the_sphere_is_refused():
 
 
 def test_cooke_triplet_entrance_pupil_is_at_its_limit():
-    """The triplet: optiland sized its's semi-diameters for a 10 mm entrance pupil."""
+    """The triplet: optiland sized its semi-diameters for a 10 mm entrance pupil."""
     from mechdeconv_ros.params import load_params_file
     from pathlib import Path
     values = load_params_file(Path(__file__).parents[1] / 'config' / 'cooke_triplet.yaml')
