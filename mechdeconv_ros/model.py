@@ -971,7 +971,7 @@ def _sigma_or_nan(fn: Callable[[Mapping[str, float]], float], nominal: Mapping[s
     """
     try:
         sigma = propagate_sigma(fn, dict(nominal), dict(sigmas))
-    except (ValueError, ZeroDivisionError, FloatingPointError):
+    except (ValueError, ZeroDivisionError, FloatingPointError, OverflowError):
         return math.nan
     return float(sigma) if math.isfinite(sigma) else math.nan
 
