@@ -688,6 +688,7 @@ def _check_physical(vals: Mapping[str, Any], prescription: Prescription, para: A
     # The stop: between the scene and the image plane.
     z_stop = prescription.stop_z_mm
     stop_name = _stop_param(vals)
+    stop_value = vals[stop_name]
     if prescription_mode:
         where = f'surface {int(vals["lens.stop_surface"])} at z = {z_stop:.4g} mm'
     else:
@@ -743,7 +744,8 @@ def _check_physical(vals: Mapping[str, Any], prescription: Prescription, para: A
         raise ModelError('lens.aperture_diameter_mm',
                          f'{d_a:g} mm ({beam} diameter) is wider than the surfaces allow: its '
                          f'axial beam is {d_a * heights[at]:.4g} mm wide at surface {at}, '
-                         f'wider than {culprit}; the largest aperture is '
+                         f'wider than {culprit}; with the stop where {stop_name} = '
+                         f'{stop_value:g} puts it (z = {z_stop:.4g} mm) the largest aperture is '
                          f'{2.0 * bound:.4g} mm (paraxial marginal ray)')
     # Edge thickness of every glass element at its clear semi-aperture.
     thickness_name = 'lens.surfaces.thickness_mm' if prescription_mode else 'lens.thickness_mm'
