@@ -592,6 +592,71 @@ def test_hostile_parameter_sets_are_refused_and_the_stream_is_unchanged(strict: 
     assert link.proc.running()
 
 
+#: Lenses that cannot exist (issue 12), on the Case 2 lens (f = 4.437 mm, 320x240 px frames):
+#: the change, the parameter the reason must name, and words of the reason.
+IMPOSSIBLE_LENSES: list[tuple[dict[str, Any], str, str]] = [
+    ({'scene.focus_distance_mm': 3.0}, 'scene.focus_distance_mm',
+     'inside the focal length 4.437 mm'),
+    ({'scene.focus_distance_mm': 0.001}, 'scene.focus_distance_mm', 'inside the focal length'),
+    ({STOP: -10.0}, STOP, 'behind the image plane'),
+    ({STOP: -1000.0}, STOP, 'behind the image plane'),
+    ({STOP: 1000.0}, STOP, 'in front of the scene'),
+    ({'lens.aperture_diameter_mm': 1000.0}, 'lens.aperture_diameter_mm',
+     'the 8 mm diameter (2|r|)'),
+    ({'lens.aperture_diameter_mm': 6.3}, 'lens.thickness_mm', 'surfaces cross'),
+    ({'lens.thickness_mm': 12.0}, 'lens.thickness_mm', 'inside the lens'),
+    ({'scene.circle_of_confusion_mm': 5.0}, 'scene.circle_of_confusion_mm',
+     'larger than the 1.681 mm diagonal'),
+    ({'lens.surfaces.radius_mm': [4.0, -4.0], 'lens.surfaces.thickness_mm': [3.0, 0.0],
+      'lens.surfaces.refractive_index': [1.5, 1.0], 'lens.surfaces.semi_diameter_mm':
+      [5.0, 0.0]}, 'lens.surfaces.semi_diameter_mm', 'a hemisphere'),
+]
+
+
+def test_lenses_that_cannot_exist_are_refused_by_both_services(strict: Link) -> None:
+    """
+    Each impossible lens is refused by set_parameters and by set_parameters_atomically.
+
+    The reason names the parameter and the limit; the parameters, the model revision and the
+    output stay as they were. Multi-parameter changes go only through the atomic service
+    (set_parameters applies them one at a time, so a valid first one would be kept).
+    """
+    link = strict
+    frame = make_image(pattern(*SMALL), 'mono8')
+    failures: list[str] = []
+    with link.collect():
+        reference = link.exchange(frame)
+        before_diag = link.diag()
+        refusals = 0
+        for change, parameter, words in IMPOSSIBLE_LENSES:
+            names = sorted(change)
+            before = link.client.get_parameters(*names)
+            messages = [param_msg(k, v, Parameter.Type.DOUBLE_ARRAY if isinstance(v, list)
+                                  else None) for k, v in change.items()]
+            replies = [('atomic', link.set_atomically(messages))]
+            if len(messages) == 1:
+                replies.append(('set_parameters', link.set_messages(messages)[0]))
+            for service, result in replies:
+                refusals += 1
+                label = f'{service} {change}'
+                if result.successful:
+                    failures.append(f'{label}: ACCEPTED')
+                elif not (result.reason.startswith(f'{parameter}: ') and words in result.reason):
+                    failures.append(f'{label}: reason {result.reason!r}')
+                if not params_unchanged(link, names, before):
+                    failures.append(f'{label}: parameters changed')
+                    link.set_atomically([value_msg(k, v) for k, v in before.items()])
+        after = link.exchange(frame)
+        after_diag = link.diag()
+    assert not failures, '\n'.join(failures)
+    assert refusals == 19
+    for key in ('model_revision', 'rebuilds', 'rebuild_failures'):
+        assert after_diag[key] == before_diag[key], key
+    assert bytes(after['image'].data) == bytes(reference['image'].data)
+    assert list(after['info'].d) == list(reference['info'].d)
+    assert link.proc.running()
+
+
 # ---------------------------------------------------------------------------------------------
 # Bad frames
 # ---------------------------------------------------------------------------------------------
