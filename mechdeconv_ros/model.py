@@ -543,17 +543,50 @@ FAR_STOP_FOCAL_LENGTHS = 1.0
 LIMIT_SLACK = 1e-9
 
 
-def _sag(radius_mm: float, height_mm: float) -> float:
+def _rim_mm(surface: Surface) -> float:
     """
-    Return the sagitta ``z(a) = r - sign(r) sqrt(r^2 - a^2)`` of a sphere at height ``a``.
+    Return the largest semi-aperture a surface can have (inf when unbounded).
 
-    A flat surface has none; beyond its hemisphere (``a > |r|``) a surface is continued by a
-    flat bevel at the hemisphere's rim, so the sagitta stays ``r`` there.
+    A sphere ends at its hemisphere, ``|r|``; a conic of constant k > -1 at
+    ``1 / (|c| sqrt(1 + k))`` (where ``1 - (1 + k) c^2 a^2`` reaches 0); a flat surface, a
+    paraboloid and a hyperboloid never end. (``conic`` and ``asphere`` are read when the
+    surface has them.)
     """
-    if radius_mm == 0.0:
-        return 0.0
-    a = min(abs(height_mm), abs(radius_mm))
-    return a * a / (radius_mm * (1.0 + math.sqrt(max(0.0, 1.0 - (a / radius_mm) ** 2))))
+    c = surface.curvature_per_mm
+    k = float(getattr(surface, 'conic', 0.0))
+    if c == 0.0 or 1.0 + k <= 0.0:
+        return math.inf
+    return 1.0 / (abs(c) * math.sqrt(1.0 + k))
+
+
+def _sag(surface: Surface, height_mm: float) -> float:
+    """
+    Return the sagitta of a surface at height ``a``: ``c a^2 / (1 + sqrt(1 - (1 + k) c^2 a^2))``.
+
+    For a sphere that is ``r - sign(r) sqrt(r^2 - a^2)``; even asphere terms ``a4 a^4 + ...``
+    are added when the surface has them. Beyond its rim (:func:`_rim_mm`) a surface is
+    continued by a flat bevel, so the sagitta stays at its rim value there.
+    """
+    c = surface.curvature_per_mm
+    k = float(getattr(surface, 'conic', 0.0))
+    a = min(abs(height_mm), _rim_mm(surface))
+    out = c * a * a / (1.0 + math.sqrt(max(0.0, 1.0 - (1.0 + k) * c * c * a * a)))
+    for power, coefficient in enumerate(getattr(surface, 'asphere', ()) or (), start=2):
+        out += float(coefficient) * a ** (2 * power)
+    return out
+
+
+def _is_sphere(surface: Surface) -> bool:
+    return not float(getattr(surface, 'conic', 0.0)) and not any(
+        getattr(surface, 'asphere', ()) or ())
+
+
+def _shape(surface: Surface) -> str:
+    """Name a surface's shape for a reason: 'a spherical surface of radius 4 mm'."""
+    if _is_sphere(surface):
+        return f'a spherical surface of radius {surface.radius_mm:g} mm'
+    return f'a conic surface (k = {float(getattr(surface, "conic", 0.0)):g}) of radius ' \
+           f'{surface.radius_mm:g} mm'
 
 
 def _paraxial_height(prescription: Prescription, h: float, u: float, z_end: float) -> float:
@@ -643,8 +676,8 @@ def _edge_crossing(surfaces: tuple[Surface, ...], z_vertices: FloatArray, elemen
     semi_aperture = max(max(heights[i] * d_a / 2.0 for i in element),
                         max(surfaces[i].semi_diameter_mm for i in element))
     for i, j in zip(element[:-1], element[1:]):
-        edge = (float(z_vertices[j]) + _sag(surfaces[j].radius_mm, semi_aperture)
-                - float(z_vertices[i]) - _sag(surfaces[i].radius_mm, semi_aperture))
+        edge = (float(z_vertices[j]) + _sag(surfaces[j], semi_aperture)
+                - float(z_vertices[i]) - _sag(surfaces[i], semi_aperture))
         if edge < -LIMIT_SLACK * max(1.0, semi_aperture):
             return i, j, edge, semi_aperture
     return None
@@ -709,12 +742,13 @@ def _check_physical(vals: Mapping[str, Any], prescription: Prescription, para: A
     # Clear apertures: a sphere is at most 2|r| wide; a given semi-diameter bounds its surface.
     surfaces = prescription.surfaces
     for i, surface in enumerate(surfaces):
-        radius, semi = surface.radius_mm, surface.semi_diameter_mm
-        if radius != 0.0 and semi > abs(radius) * (1.0 + LIMIT_SLACK):
+        semi, rim = surface.semi_diameter_mm, _rim_mm(surface)
+        if semi > rim * (1.0 + LIMIT_SLACK):
             raise ModelError('lens.surfaces.semi_diameter_mm',
                              f'surface {i}: a clear semi-diameter of {semi:g} mm is wider than '
-                             f'a spherical surface of radius {radius:g} mm can be (at most '
-                             f'|r| = {abs(radius):g} mm, a hemisphere)')
+                             f'{_shape(surface)} can be (at most '
+                             + (f'|r| = {rim:.6g} mm, a hemisphere)' if _is_sphere(surface)
+                                else f'{rim:.6g} mm, its rim)'))
     d_a = float(vals['lens.aperture_diameter_mm'])
     h, u, datum = _marginal_ray(prescription, distance, para.front_principal_z_mm)
     if not math.isfinite(u):
@@ -728,13 +762,14 @@ def _check_physical(vals: Mapping[str, Any], prescription: Prescription, para: A
     real = {i for element in elements for i in element}
     bound, culprit, at = math.inf, '', 0
     for i, surface in enumerate(surfaces):
-        radius, semi = surface.radius_mm, surface.semi_diameter_mm
+        semi, rim = surface.semi_diameter_mm, _rim_mm(surface)
         if heights[i] <= 0.0:
             continue
-        if i in real and radius != 0.0 and abs(radius) / heights[i] < bound:
-            bound, at = abs(radius) / heights[i], i
-            culprit = (f'the {2 * abs(radius):g} mm diameter (2|r|) of surface {i}, a '
-                       f'spherical surface of radius {radius:g} mm')
+        if i in real and rim / heights[i] < bound:
+            bound, at = rim / heights[i], i
+            culprit = (f'the {2 * rim:.6g} mm diameter '
+                       f'{"(2|r|) " if _is_sphere(surface) else ""}of surface {i}, '
+                       f'{_shape(surface)}')
         if semi > 0.0 and semi / heights[i] < bound:
             bound, at = semi / heights[i], i
             culprit = (f'the {2 * semi:g} mm clear diameter of surface {i} (2 x '

@@ -242,3 +242,23 @@ def test_existing_configs_build_without_refusal():
     from pathlib import Path
     for path in sorted((Path(__file__).parents[1] / 'config').glob('*.yaml')):
         build_model(load_params_file(path))
+
+
+def test_rim_and_sag_of_conics_and_aspheres():
+    """The rim and sag helpers read conic and asphere terms when a surface has them."""
+    from types import SimpleNamespace
+
+    from mechdeconv_ros.model import _rim_mm, _sag
+
+    def surface(radius, conic=0.0, asphere=()):
+        return SimpleNamespace(radius_mm=radius, curvature_per_mm=1.0 / radius if radius else 0.0,
+                               conic=conic, asphere=asphere)
+
+    assert _rim_mm(surface(-4.0)) == pytest.approx(4.0)
+    assert _rim_mm(surface(4.0, -0.5)) == pytest.approx(4.0 / math.sqrt(0.5))
+    assert math.isinf(_rim_mm(surface(4.0, -1.0))) and math.isinf(_rim_mm(surface(0.0)))
+    assert _sag(surface(4.0), 3.0) == pytest.approx(4.0 - math.sqrt(7.0))
+    assert _sag(surface(-4.0), 3.0) == pytest.approx(-(4.0 - math.sqrt(7.0)))
+    assert _sag(surface(4.0), 9.0) == pytest.approx(4.0)         # a flat bevel beyond the rim
+    assert _sag(surface(4.0, -1.0), 2.0) == pytest.approx(0.5)   # paraboloid a^2 / (2 r)
+    assert _sag(surface(0.0, 0.0, (1e-3,)), 2.0) == pytest.approx(16e-3)
