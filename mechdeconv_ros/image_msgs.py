@@ -15,8 +15,8 @@ Output images are preallocated (:class:`OutputImagePool`): one ``Image`` per
 ``array.array('B', bytes(n))``, with a numpy view on that buffer. ``cv2.remap(..., dst=view)``
 then writes straight into the message, and ``publish()`` copies it synchronously, so the same
 message is reused frame after frame. Never assign a numpy array or a memoryview to
-``msg.data``: rclpy's setter iterates it element by element (tens of ms even at 640x480;
-shared/reference/perf-anchors.md section 5).
+``msg.data``: rclpy's setter iterates it element by element (34 to 62 ms at 640x480;
+docs/design.md section 4.4).
 
 Supported encodings (sensor_msgs/image_encodings.hpp names): ``mono8``, ``mono16``, ``rgb8``,
 ``bgr8``, ``rgba8``, ``bgra8``, ``8UC1``, ``8UC3``, ``8UC4``, ``16UC1`` and ``32FC1``. The last
@@ -331,3 +331,14 @@ def camera_info_from_model(model: LensModel, *, rectified: bool) -> CameraInfo:
     :return: the message, with an empty header.
     """
     return fill_camera_info(CameraInfo(), model, rectified=rectified)
+
+
+def camera_infos_from_model(model: LensModel) -> tuple[CameraInfo, CameraInfo]:
+    """
+    Return the ``camera_info`` and ``camera_info_rect`` messages of a model.
+
+    :param model: the lens model.
+    :return: ``(raw camera, corrected image)``, see :func:`fill_camera_info`.
+    """
+    return (camera_info_from_model(model, rectified=False),
+            camera_info_from_model(model, rectified=True))
