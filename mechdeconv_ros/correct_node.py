@@ -101,10 +101,8 @@ class CorrectNode(Node):
         self._subscription: Subscription | None = None
         self._logged: dict[str, float] = {}         # kind of error -> time last logged, s
         super().__init__('correct_node', **kwargs)
-        logger = self.get_logger()
         self._live = LiveModel(
-            declare_schema(self, SCHEMA), extras=camera_infos_from_model,
-            log=lambda level, message: getattr(logger, level)(message))
+            declare_schema(self, SCHEMA), extras=camera_infos_from_model, log=self._log_line)
         guard_parameter_services(self, self._live.start_requested_rebuild,
                                  bool(kwargs.get('allow_undeclared_parameters', False)))
         self._apply_threads()
@@ -205,6 +203,22 @@ class CorrectNode(Node):
             return self._frame_error('correction', f'correction failed: {err}')
         stats.frames_out += 1
         stats.add_time((time.perf_counter() - start) * 1e3)
+
+    def _log_line(self, level: str, message: str) -> None:
+        """
+        Log a line of the live model at its level.
+
+        One call site per level: rclpy refuses a second severity from the same line
+        ("Logger severity cannot be changed between calls"), which a single
+        ``getattr(logger, level)(message)`` would hit on the first warning after an info.
+        """
+        logger = self.get_logger()
+        if level == 'error':
+            logger.error(message)
+        elif level == 'warning':
+            logger.warning(message)
+        else:
+            logger.info(message)
 
     def _frame_error(self, kind: str, error: str, line: str = '') -> None:
         """Record a problem for diagnostics; log it at most every LOG_THROTTLE_S per kind."""

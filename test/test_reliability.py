@@ -657,6 +657,42 @@ def test_lenses_that_cannot_exist_are_refused_by_both_services(strict: Link) -> 
     assert link.proc.running()
 
 
+def test_an_unusual_lens_is_accepted_and_its_warning_logged_once(strict: Link) -> None:
+    """A stop far in front of the lens is a camera: accepted, one warning in the node's log."""
+    link = strict
+    frame = make_image(pattern(*SMALL), 'mono8')
+    far = dict(link.values, **{STOP: 7.0})
+    words = f'{STOP}: the stop is'
+    try:
+        with link.collect():
+            link.exchange(frame)
+            revision = int(link.diag()['model_revision'])
+            result = link.set_messages([param_msg(STOP, 7.0)])[0]
+            assert result.successful, result.reason
+            model, _ = model_of(far, *SMALL)
+            assert model.warnings and model.warnings[0].startswith(words)
+            deadline = time.monotonic() + 10.0
+            out = link.exchange(frame)
+            while not np.allclose(out['info'].d, model.D, rtol=1e-9, atol=1e-12):
+                assert time.monotonic() < deadline, 'the accepted set never took effect'
+                out = link.exchange(frame)
+            # An unrelated change: a new model with the same warning, not logged again.
+            assert link.set_messages([param_msg('output.alpha', 0.25)])[0].successful
+            # Wait until that model is in use and summarised (its warnings are logged then).
+            status = link.diag()
+            while int(status['model_revision']) < revision + 2 or \
+                    status.get('summary_pending') != 'false':
+                assert time.monotonic() < deadline, (revision, status, link.proc.output()[-3000:])
+                status = link.diag()
+            assert status['f_number'] and words in link.proc.output()
+    finally:
+        reset = link.set_atomically([param_msg(STOP, link.values[STOP]),
+                                     param_msg('output.alpha', link.values['output.alpha'])])
+        assert reset.successful, reset.reason
+    log = link.proc.output()
+    assert log.count(words) == 1, log[-3000:]
+
+
 # ---------------------------------------------------------------------------------------------
 # Bad frames
 # ---------------------------------------------------------------------------------------------
