@@ -26,6 +26,12 @@ The model (Lim & Furukawa 2008, with the distortion traced instead of approximat
    plumb_bob ``r_d = r_u (1 + k1 r_u^2 + k2 r_u^4 + k3 r_u^6)``, or rational_polynomial
    ``r_d (1 + k4 r_u^2 + k5 r_u^4 + k6 r_u^6) = r_u (1 + k1 r_u^2 + k2 r_u^4 + k3 r_u^6)``
    when plumb_bob misses by more than 0.1 px RMS. Both are linear least squares.
+6. Before any of it, :func:`build_model` refuses a parameter set that describes no camera that
+   can exist (a focus distance inside f, a stop behind the image plane or in front of the
+   scene, an aperture wider than the surfaces, crossing surfaces, an image inside the glass, a
+   circle of confusion wider than the sensor) with a :class:`ModelError` that names the
+   parameter and the limit, and notes unusual but possible values (a far stop, f/0.7) in
+   ``LensModel.warnings``. The rules and their formulas: docs/refusals.md.
 
 Pixel coordinates follow OpenCV and ROS (REP-103 optical frame): x right, y down, origin at the
 centre of the top-left pixel.
@@ -759,6 +765,10 @@ def _check_physical(vals: Mapping[str, Any], prescription: Prescription, para: A
     z_vertices = vertex_z(prescription)
     # Beam heights per unit aperture radius (d_a / 2 = 1).
     heights = [abs(_paraxial_height(prescription, h, u, float(z))) for z in z_vertices]
+    if not all(math.isfinite(y) for y in heights):
+        raise ModelError(stop_name, f'{where}: the axial beam through it cannot be traced '
+                                    '(the paraxial marginal ray overflows): the stop is at or '
+                                    'next to an image of the scene')
     elements = _elements(prescription)
     real = {i for element in elements for i in element}
     bound, culprit, at = math.inf, '', 0
