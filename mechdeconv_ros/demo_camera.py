@@ -24,11 +24,11 @@ model's corrected image and mapped with that model's ``K_new`` (normalised coord
 later lens (another focal length, stop offset) therefore sees the same chart at another scale
 and distortion, as a real camera would.
 
-Publishing follows docs/design.md section 4.4 (pixels in and out of rclpy): one ``Image`` per
-size and encoding, ``data`` set once to ``array.array('B', bytes(n))`` and written through a numpy view
-(:func:`mechdeconv_ros.image_msgs.new_output_image`). The chart is static, so the pixels are
-rendered once per model and each tick only sets ``header.stamp`` (the publish time) and
-publishes.
+Publishing follows docs/design.md section 4.4 (pixels in and out of rclpy): one ``Image``
+per size and encoding, ``data`` set once to ``array.array('B', bytes(n))`` and written through
+a numpy view (:func:`mechdeconv_ros.image_msgs.new_output_image`). The chart is static, so
+the pixels are rendered once per model and each tick only sets ``header.stamp`` (the publish
+time) and publishes.
 """
 
 from __future__ import annotations
