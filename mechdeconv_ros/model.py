@@ -620,33 +620,26 @@ def _paraxial_height(prescription: Prescription, h: float, u: float, z_end: floa
 
 
 def _marginal_ray(prescription: Prescription, distance: float, front_principal_z: float
-                  ) -> tuple[float, float, str]:
+                  ) -> tuple[float, float]:
     """
-    Return the axial marginal ray ``(h, u)`` for an aperture of unit radius, and its datum.
+    Return the axial marginal ray ``(h, u)`` through the rim of a stop of unit radius.
 
-    ``lens.aperture_diameter_mm`` is the diameter of the axial beam in object space, the
-    entrance pupil diameter, as the f-number ``n_f = f / d_a`` counts it: the ray leaves the
-    axial scene point (or comes parallel from infinity) through the rim of the paraxial
-    entrance pupil (the stop imaged into object space). When the pupil is at infinity (an
-    object-side telecentric stop) the datum is the stop itself.
+    ``lens.aperture_diameter_mm`` is the physical diameter of the stop (at
+    ``lens.stop_surface`` in prescription mode), not its image in object space: the ray leaves
+    the axial scene point (or comes parallel from infinity) and crosses the stop plane at
+    height 1. The vignetting trace clips at the same stop.
 
-    :return: height at z = 0, object-space slope, and ``'pupil'`` or ``'stop'``.
+    :return: height at z = 0 and object-space slope (``u`` is inf when the stop sits at an
+        image of the scene, where the axial beam has no height).
     """
     z_stop = prescription.stop_z_mm
-    a = _paraxial_height(prescription, 1.0, 0.0, z_stop)
-    b = _paraxial_height(prescription, 0.0, 1.0, z_stop)
     if math.isinf(distance):
-        return 1.0, 0.0, 'pupil'
+        at_stop = _paraxial_height(prescription, 1.0, 0.0, z_stop)
+        return (1.0 / at_stop if at_stop != 0.0 else math.inf), 0.0
     z_scene = front_principal_z - distance
-    if abs(a) > 1e-12 * max(1.0, abs(b)):
-        z_pupil = b / a
-        if abs(z_pupil - z_scene) > 1e-12 * max(1.0, abs(z_scene)):
-            u = 1.0 / (z_pupil - z_scene)
-            return -z_scene * u, u, 'pupil'
-    # Telecentric in object space: unit radius at the stop plane.
     at_stop = _paraxial_height(prescription, -z_scene, 1.0, z_stop)
     u = 1.0 / at_stop if at_stop != 0.0 else math.inf
-    return -z_scene * u, u, 'stop'
+    return -z_scene * u, u
 
 
 def _elements(prescription: Prescription) -> list[list[int]]:
@@ -757,8 +750,8 @@ def _check_physical(vals: Mapping[str, Any], prescription: Prescription, para: A
                              + (f'|r| = {rim:.6g} mm, a hemisphere)' if _is_sphere(surface)
                                 else f'{rim:.6g} mm, its rim)'))
     d_a = float(vals['lens.aperture_diameter_mm'])
-    h, u, datum = _marginal_ray(prescription, distance, para.front_principal_z_mm)
-    if not math.isfinite(u):
+    h, u = _marginal_ray(prescription, distance, para.front_principal_z_mm)
+    if not (math.isfinite(h) and math.isfinite(u)):
         raise ModelError(stop_name, f'{where} sits at an image of the scene (the axial beam '
                                     'focuses there): it would bound the field, not the '
                                     'aperture')
@@ -786,9 +779,8 @@ def _check_physical(vals: Mapping[str, Any], prescription: Prescription, para: A
             culprit = (f'the {2 * semi:g} mm clear diameter of surface {i} (2 x '
                        f'lens.surfaces.semi_diameter_mm[{i}])')
     if d_a / 2.0 > bound * (1.0 + LIMIT_SLACK):
-        beam = 'entrance pupil' if datum == 'pupil' else 'stop'
         raise ModelError('lens.aperture_diameter_mm',
-                         f'{d_a:g} mm ({beam} diameter) is wider than the surfaces allow: its '
+                         f'{d_a:g} mm (stop diameter) is wider than the surfaces allow: its '
                          f'axial beam is {d_a * heights[at]:.4g} mm wide at surface {at}, '
                          f'wider than {culprit}; with the stop where {stop_name} = '
                          f'{stop_value:g} puts it (z = {z_stop:.4g} mm) the largest aperture is '

@@ -99,7 +99,9 @@ SCHEMA: tuple[ParamSpec, ...] = (
        'Radius of the rear surface; a biconvex lens has r2 < 0, 0 = flat.', -1.0e4, 1.0e4),
     _d('lens.thickness_mm', 3.0, 'mm', 'Centre thickness t of the lens.', 0.0, 1.0e3),
     _d('lens.aperture_diameter_mm', 1.0, 'mm',
-       'Diameter d_a of the aperture stop (sets the f-number, eq. 16-18).', 1.0e-3, 1.0e3),
+       'Physical diameter d_a of the aperture stop (at lens.stop_surface in prescription '
+       'mode; sets the f-number, eq. 16-18); at most what the surfaces let through.',
+       1.0e-3, 1.0e3),
     _d('lens.stop_offset_mm', 0.2, 'mm',
        'Offset m_a of the aperture stop from the front principal plane; > 0 towards the '
        'object (eq. 26-34). May put the stop inside the glass. Thick-lens mode only.',

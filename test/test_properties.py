@@ -116,7 +116,7 @@ def physical_violations(model) -> list[str]:
     Return the physical rules an accepted model breaks (docs/refusals.md); [] when none.
 
     Written from the rules, not from the model's code: first-order optics with 2x2 matrices
-    on (y, n u), the entrance pupil as the chief ray's object-space axis crossing, sags
+    on (y, n u), the marginal ray through the rim of the physical stop, sags
     ``r - sign(r) sqrt(r^2 - a^2)``.
     """
     vals = model.values
@@ -148,17 +148,13 @@ def physical_violations(model) -> list[str]:
     diagonal = math.hypot(model.width * model.pixel_mm[0], model.height * model.pixel_mm[1])
     if c > diagonal * (1 + TOL):
         out.append(f'circle of confusion {c} larger than the sensor diagonal {diagonal}')
-    # The entrance pupil: where the chief ray (stop height 0) crosses the axis in object space.
-    a = _height(lens, 1.0, 0.0, lens.stop_z_mm)
-    b = _height(lens, 0.0, 1.0, lens.stop_z_mm)
+    # The marginal ray: from the axial scene point through the rim of the physical stop.
     rho = float(vals['lens.aperture_diameter_mm']) / 2.0
     if math.isinf(distance):
-        h, u = rho, 0.0
-    elif abs(a) > 1e-9:
-        u = rho / (b / a - z_scene)
-        h = -u * z_scene
+        h, u = rho / _height(lens, 1.0, 0.0, lens.stop_z_mm), 0.0
     else:
-        return out   # object-side telecentric: the pupil is at infinity, checked at the stop
+        u = rho / _height(lens, -z_scene, 1.0, lens.stop_z_mm)
+        h = -u * z_scene
     heights = [abs(_height(lens, h, u, float(z))) for z in z_vertices]
     index_before = [lens.object_index] + [s.refractive_index for s in surfaces[:-1]]
     dummy = [s.refractive_index == index_before[i] for i, s in enumerate(surfaces)]

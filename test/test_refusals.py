@@ -134,14 +134,14 @@ def test_semi_diameter_wider_than_the_sphere_is_refused():
     assert 'surface 0' in err.reason and '|r| = 4 mm' in err.reason
 
 
-def test_cooke_triplet_entrance_pupil_is_at_its_limit():
-    """The triplet: optiland sized its semi-diameters for a 10 mm entrance pupil."""
+def test_cooke_triplet_stop_is_at_its_limit():
+    """The triplet: its stop (surface 3) is as wide as the semi-diameter optiland gave it."""
     from mechdeconv_ros.params import load_params_file
     from pathlib import Path
     values = load_params_file(Path(__file__).parents[1] / 'config' / 'cooke_triplet.yaml')
     build_model(values)
-    err = refused({**values, 'lens.aperture_diameter_mm': 10.01})
-    assert 'surface 3' in err.reason and 'the largest aperture is 10 mm' in err.reason
+    err = refused({**values, 'lens.aperture_diameter_mm': 7.61})
+    assert 'surface 3' in err.reason and 'the largest aperture is 7.602 mm' in err.reason
 
 
 # --- edge thickness: t - sag1(a) + sag2(a) >= 0 ----------------------------------------------
