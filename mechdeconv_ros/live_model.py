@@ -48,8 +48,8 @@ the record is immutable), so a frame never mixes two models. Fields only one thr
 (``_failed_build``: executor; ``_warmed_size``, ``_logged_warnings``: rebuild thread, after
 the constructor) need no lock.
 
-Warnings: a model's warnings (unusual but possible values, docs/refusals.md, and the summary's
-depth-of-field and valid-field notes) go to ``log`` once, when they appear: the start-up
+Warnings: a model's warnings (unusual but possible values, docs/design.md section 7, and the
+summary's depth-of-field and valid-field notes) go to ``log`` once, when they appear: the start-up
 model's in the constructor, later ones when the rebuild thread summarises a new model.
 """
 

@@ -31,7 +31,7 @@ The model (Lim & Furukawa 2008, with the distortion traced instead of approximat
    scene, an aperture wider than the surfaces, crossing surfaces, an image inside the glass, a
    circle of confusion wider than the sensor) with a :class:`ModelError` that names the
    parameter and the limit, and notes unusual but possible values (a far stop, f/0.7) in
-   ``LensModel.warnings``. The rules and their formulas: docs/refusals.md.
+   ``LensModel.warnings``. The rules and their formulas: docs/design.md section 7.
 
 Pixel coordinates follow OpenCV and ROS (REP-103 optical frame): x right, y down, origin at the
 centre of the top-left pixel.
@@ -539,7 +539,7 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0) -> L
 
 
 # ---------------------------------------------------------------------------------------------
-# Physical checks: a parameter set must describe a camera that can exist (docs/refusals.md)
+# Physical checks: a parameter set must describe a camera that can exist (docs/design.md s. 7)
 # ---------------------------------------------------------------------------------------------
 
 #: f-numbers below this are accepted with a warning (few production lenses are faster).
@@ -688,7 +688,7 @@ def _check_physical(vals: Mapping[str, Any], prescription: Prescription, para: A
     """
     Refuse a lens that cannot exist; return warnings for an unusual one.
 
-    The rules, each with its parameter, formula and limit, are listed in docs/refusals.md.
+    The rules, each with its parameter, formula and limit, are listed in docs/design.md section 7.
 
     :raises ModelError: naming the parameter, why, and the limit.
     :return: warnings about physically possible but unusual values.

@@ -6,8 +6,8 @@ Property-based tests over the whole parameter space of the core.
 Every combination either builds a finite, monotonic radial map, finite maps and a finite
 CameraInfo, or is refused with a ModelError that names a schema parameter. No NaN or inf may
 reach a map, a matrix or a report. Every accepted combination also describes a camera that can
-exist (docs/refusals.md), checked here by :func:`physical_violations`, written independently of
-the model's own validation with 2x2 paraxial matrices.
+exist (docs/design.md section 7), checked here by :func:`physical_violations`, written
+independently of the model's own validation with 2x2 paraxial matrices.
 
 The strategies mix lens-like values (most examples, so the accepted space is exercised; the
 last tests check that enough are accepted) with the whole range of every parameter.
@@ -113,7 +113,7 @@ def _sag(r: float, a: float) -> float:
 
 def physical_violations(model) -> list[str]:
     """
-    Return the physical rules an accepted model breaks (docs/refusals.md); [] when none.
+    Return the physical rules an accepted model breaks (docs/design.md section 7); [] when none.
 
     Written from the rules, not from the model's code: first-order optics with 2x2 matrices
     on (y, n u), the marginal ray through the rim of the physical stop, sags

@@ -1,7 +1,7 @@
 # Copyright 2026 The mechdeconv_ros Authors.
 # SPDX-License-Identifier: Apache-2.0
 """
-Refusals of lenses that cannot exist, each at its closed-form limit (docs/refusals.md).
+Refusals of lenses that cannot exist, each at its closed-form limit (docs/design.md section 7).
 
 Every rule is tested just inside (accepted, or at least not refused by that rule) and just
 outside (refused with a reason that names the parameter, says why and gives the limit).
