@@ -6,11 +6,16 @@ The demo camera publishes ``image_raw/compressed`` as image_transport's compress
 Runs the camera in this process (its own rclpy Context on a private domain): the topic is the
 RESOLVED ``image_raw`` plus ``/compressed`` (so a remapping of ``image_raw`` moves it), the
 format string is the plugin's, and the payload decodes to the chart the raw transport sends.
+The demo's ``--transport compressed`` runs the whole compressed path end to end.
 """
 
 from __future__ import annotations
 
 import os
+from pathlib import Path
+import re
+import subprocess
+import sys
 import time
 from typing import Any, Iterator
 
@@ -18,6 +23,7 @@ from mechdeconv_ros.compressed import decode
 from mechdeconv_ros.demo_camera import Chart, convert_rgb, DemoCamera
 from mechdeconv_ros.model import build_model
 from mechdeconv_ros.params import load_params_file
+from mechdeconv_ros.remap import Rectifier
 from numpy.testing import assert_array_equal
 import pytest
 import rclpy
@@ -128,3 +134,31 @@ def test_bad_transport_or_codec_is_refused(context: Context) -> None:
         assert 'png' in camera._compressed.format
     finally:
         camera.destroy_node()
+
+
+def test_demo_with_compressed_transport_corrects_the_jpeg_stream(tmp_path: Path) -> None:
+    from test_demo import blurred_difference, CHANGE, demo_env, read_rgb
+    result = subprocess.run(
+        [sys.executable, '-m', 'mechdeconv_ros.demo', '--seconds', '1', '--transport',
+         'compressed', '--out', str(tmp_path)],
+        cwd=REPO, env=demo_env(), stdin=subprocess.DEVNULL, capture_output=True, text=True,
+        timeout=120)
+    log = result.stdout + result.stderr
+    assert result.returncode == 0, log
+    assert 'Traceback' not in log, log
+    assert 'image_raw/compressed (JPEG)' in log, log
+    decode_ms = [float(v) for v in re.findall(r'decode_time_ms_mean ([0-9.]+)', log)]
+    assert decode_ms and all(v > 0.0 for v in decode_ms), log
+    assert re.search(r'frames_undecodable 0\b', log), log
+    for node in ('demo_camera', 'correct_node'):
+        assert f'{node} exited with status 0' in log, log
+    values = load_params_file(CASE2)
+    before = build_model(values, 640, 480)
+    after = build_model({**values, **CHANGE}, 640, 480)
+    chart = Chart(before)
+    raw, corrected, corrected_after = (read_rgb(tmp_path / n) for n in (
+        'raw.png', 'corrected.png', 'corrected_after_change.png'))
+    assert (blurred_difference(corrected, chart.texture)
+            < 0.5 * blurred_difference(raw, chart.texture))
+    expected_after = Rectifier(after).correct(chart.render(after))
+    assert blurred_difference(corrected_after, expected_after) < 2.0     # JPEG quality 95
