@@ -28,7 +28,8 @@ import sys
 import time
 
 import pytest
-from ros_helpers import next_domain_id, NodeProcess, REPO, ros_env, RosClient
+from ros_helpers import BEST_EFFORT, next_domain_id, NodeProcess, REPO, ros_env, RosClient
+from sensor_msgs.msg import Image
 
 try:
     import launch_ros
@@ -152,13 +153,19 @@ def test_launch_starts_the_node_in_its_namespace_and_ctrl_c_ends_it_cleanly(
         with RosClient(domain, node_name='left/correct_node') as client:
             client.wait_until_answering()
             # case2.yaml, the default params_file, was loaded by /left/correct_node.
-            assert client.get_parameters('lens.r1_mm') == {'lens.r1_mm': 4.0}
+            assert client.get_parameters('lens.r1_mm', 'image_transport') == {
+                'lens.r1_mm': 4.0, 'image_transport': 'raw'}
             assert client.spin_until(
                 lambda: ('correct_node', '/left') in
                 client.node.get_node_names_and_namespaces(), 10.0)
             topics = dict(client.node.get_topic_names_and_types())
             for topic in ('/left/image_rect', '/left/camera_info', '/left/camera_info_rect'):
                 assert topic in topics, sorted(topics)
+            # An output subscriber makes the (lazy) node subscribe its input.
+            client.node.create_subscription(Image, '/left/image_rect', lambda m: None,
+                                            BEST_EFFORT)
+            assert client.spin_until(
+                lambda: client.node.count_subscribers('/left/image_raw') > 0, 10.0)
         code, seconds = ctrl_c(proc, pid)
         log = proc.output()
     assert code == 0, log[-3000:]
@@ -175,13 +182,20 @@ def test_launch_arguments_reach_the_node_and_a_second_sigint_is_harmless(
     # --noninteractive: launch forwards SIGINT to the node after the group's own SIGINT.
     with start_launch(prefix, domain, tmp_path, '--noninteractive', 'namespace:=right',
                       f'params_file:={triplet}', 'use_fastdds_profile:=false',
+                      'image_transport:=compressed',
                       drop=('FASTRTPS_DEFAULT_PROFILES_FILE',)) as proc:
         pid = node_pid(proc)
         assert 'FASTRTPS_DEFAULT_PROFILES_FILE' not in environ_of(pid)
         with RosClient(domain, node_name='right/correct_node') as client:
             client.wait_until_answering()
-            values = client.get_parameters('lens.surfaces.radius_mm')
+            values = client.get_parameters('lens.surfaces.radius_mm', 'image_transport')
             assert len(values['lens.surfaces.radius_mm']) > 2    # the triplet's prescription
+            assert values['image_transport'] == 'compressed'
+            client.node.create_subscription(Image, '/right/image_rect', lambda m: None,
+                                            BEST_EFFORT)
+            assert client.spin_until(lambda: client.node.count_subscribers(
+                '/right/image_raw/compressed') > 0, 10.0)
+            assert client.node.count_subscribers('/right/image_raw') == 0
         code, seconds = ctrl_c(proc, pid)
         log = proc.output()
     assert code == 0, log[-3000:]
