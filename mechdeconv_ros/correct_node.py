@@ -19,6 +19,10 @@ Topics (relative names, so namespaces and remaps apply; ``/diagnostics`` is abso
   (the corrected image: K = K_new, D = 0, R = I, the same P), each with the input header.
   A big-endian 16-bit or float input is published in the host's byte order (``is_bigendian``
   says which), with the same values;
+* publishes ``image_rect/compressed`` (sensor_msgs/CompressedImage, the resolved
+  ``image_rect`` plus ``/compressed``) only while it has a subscriber: the corrected image
+  encoded as image_transport's compressed plugin does (``image_rect.compressed.format``,
+  ``.jpeg_quality``, ``.png_level``); 8-bit colour and mono8/mono16 images only;
 * publishes ``/diagnostics`` (DiagnosticArray, 1 Hz: :mod:`mechdeconv_ros.diagnostics`).
 
 Wiring only: :mod:`~mechdeconv_ros.ros_params` declares the schema,
@@ -35,6 +39,7 @@ subscriber count. An rmw without them falls back to a poll every :data:`LAZY_POL
 
 from __future__ import annotations
 
+import array
 import signal
 import sys
 import threading
@@ -43,7 +48,7 @@ from typing import Any
 
 import cv2
 from diagnostic_msgs.msg import DiagnosticArray
-from mechdeconv_ros.compressed import decode, UnsupportedCompressedFormatError
+from mechdeconv_ros.compressed import decode, encode, UnsupportedCompressedFormatError
 from mechdeconv_ros.diagnostics import diagnostics_message, FrameStats
 from mechdeconv_ros.graph_env import keep_large_buffers
 from mechdeconv_ros.image_msgs import (
@@ -135,8 +140,11 @@ class CorrectNode(Node):
                                   qos_overriding_options=QoSOverridingOptions.
                                   with_default_policies())
             for msg_type, topic in ((Image, 'image_rect'), (CameraInfo, 'camera_info'),
-                                    (CameraInfo, 'camera_info_rect')))
-        self._pub_image, self._pub_info, self._pub_info_rect = self._outputs
+                                    (CameraInfo, 'camera_info_rect'),
+                                    (CompressedImage,
+                                     self.resolve_topic_name('image_rect') + '/compressed')))
+        self._pub_image, self._pub_info, self._pub_info_rect, self._pub_compressed = \
+            self._outputs
         self._rebuild_trigger = self.create_guard_condition(self._live.start_requested_rebuild)
         self._live.start()
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -240,11 +248,30 @@ class CorrectNode(Node):
             self._pub_image.publish(out.msg)
             self._pub_info.publish(info_raw)
             self._pub_info_rect.publish(info_rect)
+            if self._pub_compressed.get_subscription_count() > 0:
+                self._publish_compressed(out.pixels, encoding, header)
         except Exception as err:        # noqa: B902 - one bad frame must not stop the stream
             stats.frames_failed += 1
             return self._frame_error('correction', f'correction failed: {err}')
         stats.frames_out += 1
         stats.add_time((time.perf_counter() - start) * 1e3)
+
+    def _publish_compressed(self, pixels: Any, encoding: Encoding, header: Any) -> None:
+        """Publish the corrected pixels on image_rect/compressed; log what cannot be encoded."""
+        live = self._live
+        try:
+            fmt, data = encode(
+                pixels, encoding.name, str(live.value('image_rect.compressed.format')),
+                jpeg_quality=int(live.value('image_rect.compressed.jpeg_quality')),
+                png_level=int(live.value('image_rect.compressed.png_level')))
+        except Exception as err:        # noqa: B902 - e.g. 32FC1; image_rect is out already
+            return self._frame_error('compressed output',
+                                     f'image_rect/compressed not published: {err}')
+        msg = CompressedImage(format=fmt)
+        msg.header = header
+        msg.data = array.array('B', data)
+        self._pub_compressed.publish(msg)
+        self._stats.frames_out_compressed += 1
 
     def _frame_error(self, kind: str, error: str, line: str = '') -> None:
         """Record a problem for diagnostics; log it at most every LOG_THROTTLE_S per kind."""

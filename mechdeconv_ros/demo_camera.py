@@ -32,10 +32,9 @@ and distortion, as a real camera would.
 
 Publishing follows docs/design.md section 4.4 (pixels in and out of rclpy): one ``Image`` per
 size and encoding, ``data`` set once to ``array.array('B', bytes(n))`` and written through a
-numpy view
-(:func:`mechdeconv_ros.image_msgs.new_output_image`). The chart is static, so the pixels are
-rendered (and compressed) once per model and each tick only sets ``header.stamp`` (the publish
-time) and publishes.
+numpy view (:func:`mechdeconv_ros.image_msgs.new_output_image`). The chart is static, so the
+pixels are rendered (and compressed) once per model and each tick only sets ``header.stamp``
+(the publish time) and publishes.
 """
 
 from __future__ import annotations

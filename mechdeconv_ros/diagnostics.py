@@ -10,7 +10,8 @@ timings (:class:`FrameStats`, per diagnostics period) and the lens summary
 (``LensModel.report()`` flattened to dotted keys, e.g. ``fov_deg.horizontal``). The input is
 named by ``image_transport`` and ``input_topic``; with compressed input, ``frames_undecodable``
 counts refused payloads and ``decode_time_ms_{mean,max,last}`` time the JPEG/PNG decoding
-(included in ``frame_time_ms_*``). Level: ERROR
+(included in ``frame_time_ms_*``); ``frames_out_compressed`` counts the frames published on
+``image_rect/compressed``. Level: ERROR
 while the last rebuild failed (the previous model stays in use), WARN for the model's warnings
 or frames that all fail, OK otherwise.
 """
@@ -45,6 +46,7 @@ class FrameStats:
         self.image_transport = 'raw'
         self.input_topic = ''
         self.frames_undecodable = 0
+        self.frames_out_compressed = 0
         self.decode_ms_last = math.nan
         self.decode_ms_max = 0.0        # since the last diagnostics message
         self.decode_ms_sum = 0.0        # since the last diagnostics message
@@ -120,6 +122,7 @@ def diagnostics_message(node: Node, live: LiveStatus, stats: FrameStats,
         'last_error': stats.last_error,
         'image_transport': stats.image_transport,
         'input_topic': stats.input_topic,
+        'frames_out_compressed': stats.frames_out_compressed,
     }
     if stats.image_transport == 'compressed':
         decode_mean, decode_max = stats.take_decode_period()

@@ -179,6 +179,15 @@ SCHEMA: tuple[ParamSpec, ...] = (
               '(sensor_msgs/Image); compressed subscribes the resolved image_raw + '
               '/compressed (sensor_msgs/CompressedImage, JPEG or PNG as image_transport '
               'writes it) and decodes every frame.', choices=IMAGE_TRANSPORTS, read_only=True),
+    # --- image_rect/compressed output (image_transport's parameter names) ---
+    ParamSpec('image_rect.compressed.format', 'string', 'jpeg', '',
+              'Codec of image_rect/compressed (sensor_msgs/CompressedImage, published only '
+              "while it has a subscriber, as image_transport's compressed plugin writes it): "
+              'jpeg or png.', choices=('jpeg', 'png')),
+    _i('image_rect.compressed.jpeg_quality', 95, '1',
+       'JPEG quality of image_rect/compressed.', 1, 100),
+    _i('image_rect.compressed.png_level', 3, '1',
+       'PNG compression level (zlib) of image_rect/compressed.', 0, 9),
 )
 
 #: Specs by name.

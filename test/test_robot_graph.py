@@ -14,7 +14,8 @@ subscribes ``/cam/image_raw/compressed`` (the resolved name plus ``/compressed``
 image_transport names it); a JPEG and a 16-bit PNG frame are corrected exactly as the core
 corrects the decoded pixels; a frame that does not decode, or names an encoding the node
 cannot produce, is counted and the next good frame is corrected; the diagnostics carry the
-decode time.
+decode time. ``image_rect/compressed`` carries the corrected frame as image_transport would
+(JPEG by default, PNG after ``image_rect.compressed.format`` is set to png).
 """
 
 from __future__ import annotations
@@ -268,3 +269,42 @@ def test_bad_compressed_frames_are_counted_and_the_next_good_one_is_corrected(
     model = build_model(lens_values(LENSES['left']), *SIZE)
     npt.assert_array_equal(rectified(image), expected(model, decode(fmt, data).pixels))
     assert 'Traceback' not in proc.output()
+
+
+def test_image_rect_compressed_follows_its_parameters(compressed_node: Any) -> None:
+    proc, client, out, pub = compressed_node
+    received: dict[tuple[int, int], CompressedImage] = {}
+    client.node.create_subscription(
+        CompressedImage, '/image_rect/compressed',
+        lambda m: received.__setitem__(stamp_of(m), m), BEST_EFFORT)
+    model = build_model(lens_values(LENSES['left']), *SIZE)
+    src = pattern(seed=5)
+    fmt, data = encode(src, 'bgr8', 'png')
+    want = expected(model, decode(fmt, data).pixels)
+    try:
+        for codec in ('jpeg', 'png'):
+            if codec == 'png':
+                result = client.set_parameters(
+                    Parameter('image_rect.compressed.format', value='png'))
+                assert result[0].successful, result[0].reason
+            deadline = time.monotonic() + 8.0
+            while True:
+                msg = compressed_msg(fmt, data)
+                stamp = client.next_stamp(msg)
+                pub.publish(msg)
+                client.spin_until(lambda: stamp in received, 0.5)
+                if stamp in received and codec in received[stamp].format:
+                    break
+                assert time.monotonic() < deadline, f'no {codec} image_rect/compressed'
+            got = received[stamp]
+            assert got.format == f'bgr8; {codec} compressed bgr8'
+            assert got.header.frame_id == 'cam_optical'
+            pixels = decode(got.format, got.data).pixels
+            if codec == 'png':
+                npt.assert_array_equal(pixels, want)
+            else:
+                assert np.abs(pixels.astype(float) - want).mean() < 3.0     # quality 95
+    finally:
+        client.set_parameters(Parameter('image_rect.compressed.format', value='jpeg'))
+    values = out.status(STATUS, lambda v: int(v['frames_out_compressed']) >= 2)
+    assert int(values['frames_out_compressed']) >= 2
