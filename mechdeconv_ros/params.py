@@ -31,6 +31,9 @@ import yaml
 
 ParamValue = Union[bool, int, float, str, list]
 
+#: Allowed values of ``image_transport``: what the node subscribes to.
+IMAGE_TRANSPORTS = ('raw', 'compressed')
+
 #: Allowed values of ``output.interpolation`` and the OpenCV flag names they stand for.
 INTERPOLATIONS = ('nearest', 'linear', 'cubic', 'lanczos4')
 
@@ -173,6 +176,20 @@ SCHEMA: tuple[ParamSpec, ...] = (
        'Threads OpenCV may use for the remap (cv2.setNumThreads); 0 = OpenCV default, all '
        'cores, as image_proc. 1 leaves the other cores to the camera driver and the DDS '
        'transport; on 2 cores it sustains about 2/3 of the frame rate.', 0, 64),
+    ParamSpec('image_transport', 'string', 'raw', '',
+              'Input transport, read at start-up as image_proc does: raw subscribes image_raw '
+              '(sensor_msgs/Image); compressed subscribes the resolved image_raw + '
+              '/compressed (sensor_msgs/CompressedImage, JPEG or PNG as image_transport '
+              'writes it) and decodes every frame.', choices=IMAGE_TRANSPORTS, read_only=True),
+    # --- image_rect/compressed output (image_transport's parameter names) ---
+    ParamSpec('image_rect.compressed.format', 'string', 'jpeg', '',
+              'Codec of image_rect/compressed (sensor_msgs/CompressedImage, published only '
+              "while it has a subscriber, as image_transport's compressed plugin writes it): "
+              'jpeg or png.', choices=('jpeg', 'png')),
+    _i('image_rect.compressed.jpeg_quality', 95, '1',
+       'JPEG quality of image_rect/compressed.', 1, 100),
+    _i('image_rect.compressed.png_level', 3, '1',
+       'PNG compression level (zlib) of image_rect/compressed.', 0, 9),
 )
 
 #: Specs by name.
