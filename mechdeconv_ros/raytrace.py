@@ -164,7 +164,7 @@ def _check_shape(i: int, surface: Surface, semi: float) -> None:
     for j, a in enumerate(terms):
         finite_number(f'surface {i}: asphere a{2 * j + 4}', a)
     limit = surfaces.domain_limit_mm(surface)
-    if semi > 0 and semi > limit:
+    if conic != 0.0 and semi > 0 and semi > limit:
         raise ValueError(f'surface {i}: conic {conic:g} leaves the sag undefined beyond '
                          f'r = {limit:.4g} mm, inside the semi-diameter {semi:g} mm')
 
