@@ -486,7 +486,9 @@ def hostile_attempts() -> list[Attempt]:
                                                                      [-1.0]}),
          ('lens.surfaces.conic',)),
         ('conic leaves the sag undefined inside the semi-diameter',
-         dict(prescription(2), **{'lens.surfaces.semi_diameter_mm': [3.0, 3.0],
+         # k = 5 on r = 10 mm: the sag ends at r = 4.08 mm, inside the 5 mm semi-diameter.
+         dict(prescription(2), **{'lens.surfaces.radius_mm': [10.0, -10.0],
+                                  'lens.surfaces.semi_diameter_mm': [5.0, 5.0],
                                   'lens.surfaces.conic': [5.0, 0.0]}),
          ('lens.surfaces.conic',)),
     ]
