@@ -13,8 +13,12 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.xml')),
+        ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
     ],
-    install_requires=['setuptools', 'numpy', 'opencv-python-headless', 'PyYAML'],
+    # Python libraries only: ROS packages (rclpy, *_msgs, launch_ros, ...) are declared in
+    # package.xml (test/test_dependencies.py explains why and checks both lists).
+    install_requires=['setuptools', 'numpy', 'opencv-python-headless', 'PyYAML', 'matplotlib',
+                      'tqdm'],
     zip_safe=True,
     maintainer='mechdeconv_ros maintainers',
     maintainer_email='maintainers@mechdeconv.invalid',

@@ -96,7 +96,8 @@ SET_REPEATS = 8
 SET_VALUES = (0.5, 0.2)
 STOP_OFFSET = 'lens.stop_offset_mm'
 #: What the probe reads from correct_node's /diagnostics.
-DIAGNOSTIC_KEYS = ('frame_time_ms_mean', 'frame_time_ms_max', 'last_rebuild_ms')
+DIAGNOSTIC_KEYS = ('frame_time_ms_mean', 'frame_time_ms_max', 'last_rebuild_ms',
+                   'decode_time_ms_mean')
 #: Readiness and first-frame waits, s.
 READY_TIMEOUT_S = 20.0
 FIRST_FRAME_TIMEOUT_S = 6.0

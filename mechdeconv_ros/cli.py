@@ -65,7 +65,19 @@ def _model(args: argparse.Namespace, width: int = 0, height: int = 0) -> LensMod
     if not (values['sensor.width_px'] or width) or not (values['sensor.height_px'] or height):
         raise UsageError('sensor.width_px: the image size is unknown; give --width and '
                          '--height or set sensor.width_px and sensor.height_px')
-    return build_model(values, width, height)
+    model = build_model(values, width, height)
+    if getattr(args, 'func', None) is not cmd_info:     # info lists them in its report
+        _warn_once(args, model.warnings)
+    return model
+
+
+def _warn_once(args: argparse.Namespace, warnings: Sequence[str]) -> None:
+    """Print each model warning once per run to stderr (a folder may build several models)."""
+    seen = args.__dict__.setdefault('warned', set())
+    for warning in warnings:
+        if warning not in seen:
+            seen.add(warning)
+            print(f'mechdeconv: warning: {warning}', file=sys.stderr)
 
 
 def cmd_info(args: argparse.Namespace) -> int:
@@ -90,11 +102,15 @@ def format_report(report: dict[str, Any]) -> str:
     def mm(value: float | None) -> str:
         return 'inf' if value is None else f'{value:.4g} mm'
 
+    def num(value: float | None, spec: str) -> str:
+        return 'n/a' if value is None else format(value, spec)
+
     fov = report['fov_deg']
     dof = report['depth_of_field_mm']
     lines = [
         f"lens ({report['mode']}): f = {report['focal_length_mm']:.5g} "
-        f"± {report['focal_length_sigma_mm']:.2g} mm, f-number {report['f_number']:.3g}, "
+        f"± {num(report['focal_length_sigma_mm'], '.2g')} mm, "
+        f"f-number {report['f_number']:.3g}, "
         f"image distance {report['image_distance_mm']:.5g} mm",
         f"image: {report['width_px']}x{report['height_px']} px -> "
         f"{report['out_width_px']}x{report['out_height_px']} px",
@@ -104,12 +120,11 @@ def format_report(report: dict[str, Any]) -> str:
         f"{mm(report['footprint_mm']['x'])} x {mm(report['footprint_mm']['y'])}, "
         f"feature resolution {mm(report['feature_resolution_mm']['x'])} x "
         f"{mm(report['feature_resolution_mm']['y'])}",
-        f"hyperfocal {report['hyperfocal_mm']:.4g} ± {report['hyperfocal_sigma_mm']:.2g} mm, "
+        f"hyperfocal {num(report['hyperfocal_mm'], '.4g')} ± "
+        f"{num(report['hyperfocal_sigma_mm'], '.2g')} mm, "
         f"depth of field {mm(dof['near'])} to {mm(dof['far'])}",
-        f"distortion: max displacement {report['max_displacement_px']:.3f} px, "
-        # no corner sigma when the corners lie outside the image circle (a fisheye)
-        'corner sigma ' + ('n/a' if report['corner_sigma_px'] is None
-                           else f"{report['corner_sigma_px']:.3g} px"),
+        f"distortion: max displacement {num(report['max_displacement_px'], '.3f')} px, "
+        f"corner sigma {num(report['corner_sigma_px'], '.3g')} px",
         f"equivalent calibration: {report['distortion_model']} D = "
         f"[{', '.join(f'{d:.6g}' for d in report['D'])}] (max error "
         f"{_px(report['equivalent_max_error_px'])} over the raw image, RMS "

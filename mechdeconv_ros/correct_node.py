@@ -6,12 +6,23 @@ correct_node: live lens-distortion correction from the lens's physical descripti
 Topics (relative names, so namespaces and remaps apply; ``/diagnostics`` is absolute):
 
 * subscribes ``image_raw`` (sensor_msgs/Image) -- only while an output has a subscriber,
-  unless ``lazy_subscription`` is false;
+  unless ``lazy_subscription`` is false; with ``image_transport:=compressed`` (read at
+  start-up, as image_proc's) it subscribes ``image_raw/compressed``
+  (sensor_msgs/CompressedImage) instead, named as image_transport names it: the RESOLVED
+  ``image_raw`` plus ``/compressed``, so ``-r image_raw:=/cam/image_raw`` moves it to
+  ``/cam/image_raw/compressed``. Each frame is decoded by :mod:`mechdeconv_ros.compressed`
+  (JPEG/PNG, 8/16 bit, image_transport's and cv_bridge's format strings) and ``image_rect``
+  is published raw, in the decoded encoding; a payload that does not decode, or names an
+  encoding the node cannot produce, is refused, counted and logged (throttled);
 * publishes ``image_rect`` (same encoding, the input header), ``camera_info`` (the raw camera:
   K and the equivalent D of the traced lens, R = I, P = [K_new | 0]) and ``camera_info_rect``
   (the corrected image: K = K_new, D = 0, R = I, the same P), each with the input header.
   A big-endian 16-bit or float input is published in the host's byte order (``is_bigendian``
   says which), with the same values;
+* publishes ``image_rect/compressed`` (sensor_msgs/CompressedImage, the resolved
+  ``image_rect`` plus ``/compressed``) only while it has a subscriber: the corrected image
+  encoded as image_transport's compressed plugin does (``image_rect.compressed.format``,
+  ``.jpeg_quality``, ``.png_level``); 8-bit colour and mono8/mono16 images only;
 * publishes ``/diagnostics`` (DiagnosticArray, 1 Hz: :mod:`mechdeconv_ros.diagnostics`).
 
 Wiring only: :mod:`~mechdeconv_ros.ros_params` declares the schema,
@@ -28,6 +39,7 @@ subscriber count. An rmw without them falls back to a poll every :data:`LAZY_POL
 
 from __future__ import annotations
 
+import array
 import signal
 import sys
 import threading
@@ -36,10 +48,11 @@ from typing import Any
 
 import cv2
 from diagnostic_msgs.msg import DiagnosticArray
+from mechdeconv_ros.compressed import decode, encode, UnsupportedCompressedFormatError
 from mechdeconv_ros.diagnostics import diagnostics_message, FrameStats
 from mechdeconv_ros.graph_env import keep_large_buffers
 from mechdeconv_ros.image_msgs import (
-    camera_infos_from_model, image_to_array, MalformedImageError, OutputImagePool,
+    camera_infos_from_model, Encoding, image_to_array, MalformedImageError, OutputImagePool,
     UnsupportedEncodingError)
 from mechdeconv_ros.live_model import (  # noqa: F401 - MAX_SURFACES: the node's limit
     changes_of, FrameDropped, LiveModel, MAX_SURFACES)
@@ -57,7 +70,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
 #: Seconds between checks of the output subscriber counts, only on an rmw without matched events.
 LAZY_POLL_S = 0.5
@@ -101,13 +114,14 @@ class CorrectNode(Node):
         self._subscription: Subscription | None = None
         self._logged: dict[str, float] = {}         # kind of error -> time last logged, s
         super().__init__('correct_node', **kwargs)
-        logger = self.get_logger()
         self._live = LiveModel(
-            declare_schema(self, SCHEMA), extras=camera_infos_from_model,
-            log=lambda level, message: getattr(logger, level)(message))
+            declare_schema(self, SCHEMA), extras=camera_infos_from_model, log=self._log_line)
         guard_parameter_services(self, self._live.start_requested_rebuild,
                                  bool(kwargs.get('allow_undeclared_parameters', False)))
         self._apply_threads()
+        self._stats.image_transport = str(self._live.value('image_transport'))
+        self._stats.input_topic = self.resolve_topic_name('image_raw') + (
+            '/compressed' if self._stats.image_transport == 'compressed' else '')
         self._frame_group = MutuallyExclusiveCallbackGroup()
         # Probe for matched events on /diagnostics: it has no QoS override parameters, which
         # a second try at creating an output would declare twice.
@@ -124,8 +138,11 @@ class CorrectNode(Node):
                                   qos_overriding_options=QoSOverridingOptions.
                                   with_default_policies())
             for msg_type, topic in ((Image, 'image_rect'), (CameraInfo, 'camera_info'),
-                                    (CameraInfo, 'camera_info_rect')))
-        self._pub_image, self._pub_info, self._pub_info_rect = self._outputs
+                                    (CameraInfo, 'camera_info_rect'),
+                                    (CompressedImage,
+                                     self.resolve_topic_name('image_rect') + '/compressed')))
+        self._pub_image, self._pub_info, self._pub_info_rect, self._pub_compressed = \
+            self._outputs
         self._rebuild_trigger = self.create_guard_condition(self._live.start_requested_rebuild)
         self._live.start()
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -136,7 +153,7 @@ class CorrectNode(Node):
         self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
         lazy = 'lazy subscription' if self._live.value('lazy_subscription') else 'subscribed'
         self.get_logger().info(f'ready: f = {self._live.startup_model.focal_length_mm:.4g} mm, '
-                               f'{lazy} to {self.resolve_topic_name("image_raw")}')
+                               f'{lazy} to {self._stats.input_topic}')
 
     def _on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
         """Validate a set by building the candidate model; never raises."""
@@ -184,8 +201,37 @@ class CorrectNode(Node):
         except Exception as err:        # noqa: B902 - one bad frame must not stop the stream
             stats.frames_failed += 1
             return self._frame_error('unreadable', f'unreadable frame: {err!r}')
+        self._correct(msg.header, pixels, encoding, start)
+
+    def _on_compressed(self, msg: CompressedImage) -> None:
+        """Decode one compressed frame, then correct and publish it; never raises."""
+        start = time.perf_counter()
+        stats = self._stats
+        stats.frames_in += 1
         try:
-            active = self._live.model_for_frame(int(msg.width), int(msg.height))
+            decoded = decode(msg.format, msg.data)
+        except (UnsupportedCompressedFormatError, UnsupportedEncodingError) as err:
+            stats.rejected_encodings += 1
+            stats.last_rejected_encoding = err.encoding
+            return self._frame_error('encoding', str(err),
+                                     f'{err} ({stats.rejected_encodings} frames so far)')
+        except MalformedImageError as err:      # UndecodableImageError included
+            stats.frames_undecodable += 1
+            error = f'undecodable frame: {err}'
+            return self._frame_error('undecodable', error,
+                                     f'{error} ({stats.frames_undecodable} so far)')
+        except Exception as err:        # noqa: B902 - one bad frame must not stop the stream
+            stats.frames_undecodable += 1
+            return self._frame_error('undecodable', f'undecodable frame: {err!r}')
+        stats.add_decode_time((time.perf_counter() - start) * 1e3)
+        self._correct(msg.header, decoded.pixels, decoded.encoding, start)
+
+    def _correct(self, header: Any, pixels: Any, encoding: Encoding, start: float) -> None:
+        """Correct one frame's pixels and publish them with both CameraInfos; never raises."""
+        stats = self._stats
+        height, width = pixels.shape[:2]
+        try:
+            active = self._live.model_for_frame(int(width), int(height))
         except FrameDropped as drop:
             stats.frames_dropped += 1
             if not drop.repeat:
@@ -193,18 +239,53 @@ class CorrectNode(Node):
             return
         try:
             model = active.model
-            out = self._pool.get(model.out_width, model.out_height, msg.encoding)
+            out = self._pool.get(model.out_width, model.out_height, encoding.name)
             active.rectifier.correct(pixels, out.pixels, nearest=encoding.depth)
             info_raw, info_rect = active.extras
-            out.msg.header = info_raw.header = info_rect.header = msg.header
+            out.msg.header = info_raw.header = info_rect.header = header
             self._pub_image.publish(out.msg)
             self._pub_info.publish(info_raw)
             self._pub_info_rect.publish(info_rect)
+            if self._pub_compressed.get_subscription_count() > 0:
+                self._publish_compressed(out.pixels, encoding, header)
         except Exception as err:        # noqa: B902 - one bad frame must not stop the stream
             stats.frames_failed += 1
             return self._frame_error('correction', f'correction failed: {err}')
         stats.frames_out += 1
         stats.add_time((time.perf_counter() - start) * 1e3)
+
+    def _log_line(self, level: str, message: str) -> None:
+        """
+        Log a line of the live model at its level.
+
+        One call site per level: rclpy refuses a second severity from the same line
+        ("Logger severity cannot be changed between calls"), which a single
+        ``getattr(logger, level)(message)`` would hit on the first warning after an info.
+        """
+        logger = self.get_logger()
+        if level == 'error':
+            logger.error(message)
+        elif level == 'warning':
+            logger.warning(message)
+        else:
+            logger.info(message)
+
+    def _publish_compressed(self, pixels: Any, encoding: Encoding, header: Any) -> None:
+        """Publish the corrected pixels on image_rect/compressed; log what cannot be encoded."""
+        live = self._live
+        try:
+            fmt, data = encode(
+                pixels, encoding.name, str(live.value('image_rect.compressed.format')),
+                jpeg_quality=int(live.value('image_rect.compressed.jpeg_quality')),
+                png_level=int(live.value('image_rect.compressed.png_level')))
+        except Exception as err:        # noqa: B902 - e.g. 32FC1; image_rect is out already
+            return self._frame_error('compressed output',
+                                     f'image_rect/compressed not published: {err}')
+        msg = CompressedImage(format=fmt)
+        msg.header = header
+        msg.data = array.array('B', data)
+        self._pub_compressed.publish(msg)
+        self._stats.frames_out_compressed += 1
 
     def _frame_error(self, kind: str, error: str, line: str = '') -> None:
         """Record a problem for diagnostics; log it at most every LOG_THROTTLE_S per kind."""
@@ -220,14 +301,17 @@ class CorrectNode(Node):
         lazy = bool(self._live.value('lazy_subscription'))
         wanted = not lazy or any(pub.get_subscription_count() > 0 for pub in self._outputs)
         if wanted and self._subscription is None:
+            topic = self._stats.input_topic
+            compressed = self._stats.image_transport == 'compressed'
             try:
                 self._subscription = self.create_subscription(
-                    Image, 'image_raw', self._on_image, sensor_qos(),
+                    CompressedImage if compressed else Image, topic,
+                    self._on_compressed if compressed else self._on_image, sensor_qos(),
                     callback_group=self._frame_group,
                     qos_overriding_options=QoSOverridingOptions.with_default_policies())
             except Exception as err:    # noqa: B902 - e.g. a bad qos_overrides value
-                return self._frame_error('subscribe', f'cannot subscribe to image_raw: {err}')
-            self.get_logger().debug('subscribed to image_raw')
+                return self._frame_error('subscribe', f'cannot subscribe to {topic}: {err}')
+            self.get_logger().debug(f'subscribed to {topic}')
         elif not wanted and self._subscription is not None:
             self.destroy_subscription(self._subscription)
             self._subscription = None
@@ -255,7 +339,11 @@ def main(args: list[str] | None = None) -> None:
     SIGINT and SIGTERM only set a flag that the spin loop checks between callbacks: rclpy's
     KeyboardInterrupt, raised while a received image is converted to Python, becomes a
     RuntimeError, so Ctrl-C (or ``ros2 launch`` stopping the node) ended with a traceback and
-    exit code 1. A second signal stops the process the default way, should shutdown hang.
+    exit code 1. A second SIGINT is ignored: Ctrl-C on ``ros2 launch`` reaches the node from the
+    terminal, and launch forwards one more (always when ``--noninteractive``), which used to
+    interrupt the shutdown with a KeyboardInterrupt (exit code -2). Should shutdown hang, a third
+    SIGINT, or a SIGTERM after the first signal (launch sends one after its timeout), stops the
+    process the default way.
 
     :param args: command-line arguments for rclpy (``--ros-args ...``); default ``sys.argv``.
     """
@@ -264,8 +352,11 @@ def main(args: list[str] | None = None) -> None:
 
     def request_stop(signum: int, frame: Any) -> None:
         stop.set()
-        signal.signal(signal.SIGINT, signal.default_int_handler)
+        signal.signal(signal.SIGINT, ignore_once)
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+    def ignore_once(signum: int, frame: Any) -> None:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     previous = {}

@@ -25,7 +25,10 @@
 
 Ctrl-C at any time stops the children and exits 130. Options: ``--seconds`` (each measuring
 window, default 10; also ``MECHDECONV_DEMO_SECONDS``), ``--out`` (default ``demo_out``),
-``--stop-offset``/``--thickness`` (the new lens), ``--rate``, ``--domain-id``.
+``--stop-offset``/``--thickness`` (the new lens), ``--rate``, ``--domain-id``, and
+``--transport compressed``: the camera then publishes JPEG frames on ``image_raw/compressed``
+(``demo_camera`` ``transport:=compressed``) and the node decodes them
+(``image_transport:=compressed``); the decode time shows in the node's diagnostics.
 """
 
 from __future__ import annotations
@@ -70,6 +73,9 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     parser.add_argument('--thickness', type=float, default=4.0,
                         help='new lens.thickness_mm (default 4.0; Case 2 has 3.0)')
     parser.add_argument('--rate', type=float, default=30.0, help='camera rate in Hz (30)')
+    parser.add_argument('--transport', choices=('raw', 'compressed'), default='raw',
+                        help='raw: image_raw (default); compressed: the camera publishes JPEG '
+                             'on image_raw/compressed and the node decodes it')
     first, last = graph_env.DOMAIN_RANGES['demo']
     parser.add_argument('--domain-id', type=int, default=None,
                         help=f'ROS_DOMAIN_ID of the demo graph (default: one of {first}-{last})')
@@ -111,13 +117,17 @@ def run(args: argparse.Namespace, children: list[Child]) -> int:
     say(f'ROS_DOMAIN_ID={domain}, ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, '
         f'FASTRTPS_DEFAULT_PROFILES_FILE={env.get(graph_env.PROFILE_VAR)}')
     commands = {
-        'correct_node': ['--params-file', str(params_file)],
-        'demo_camera': ['--params-file', str(params_file), '-p', f'rate_hz:={args.rate!r}']}
+        'correct_node': ['--params-file', str(params_file),
+                         '-p', f'image_transport:={args.transport}'],
+        'demo_camera': ['--params-file', str(params_file), '-p', f'rate_hz:={args.rate!r}',
+                        '-p', f'transport:={args.transport}']}
     for name, ros_args in commands.items():
         argv = [sys.executable, '-m', f'mechdeconv_ros.{name}', '--ros-args', *ros_args]
         children.append(Child(argv, env, out / f'{name}.log', die_with_parent=True))
         say(f'started {name} (pid {children[-1].pid}, log {out}/{name}.log)')
-    say(f'demo_camera publishes 640x480 rgb8 at {args.rate:g} Hz through the Case 2 lens')
+    topic = 'image_raw' if args.transport == 'raw' else 'image_raw/compressed (JPEG)'
+    say(f'demo_camera publishes 640x480 rgb8 on {topic} at {args.rate:g} Hz through the Case 2 '
+        'lens')
 
     graph_env.configure_this_process(env)
     import rclpy
@@ -126,7 +136,7 @@ def run(args: argparse.Namespace, children: list[Child]) -> int:
     from mechdeconv_ros.demo_monitor import Monitor
 
     rclpy.init(args=[], domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
-    monitor = Monitor()
+    monitor = Monitor(args.transport)
     executor = SingleThreadedExecutor()
     executor.add_node(monitor)
     spinner = threading.Thread(target=_spin, args=(executor,), name='demo-spin', daemon=True)

@@ -14,9 +14,15 @@ the same params files (``/**`` sections apply to every node), so::
 
     demo_camera --ros-args --params-file config/case2.yaml
 
-renders through the Case 2 lens. A lens parameter set on the camera (``ros2 param set
-/demo_camera lens.stop_offset_mm 0.6``) simulates a physical change of the real lens; the user
-then tells ``correct_node`` the same values. The demo (:mod:`mechdeconv_ros.demo`) does both.
+renders through the Case 2 lens. With ``transport:=compressed`` it publishes
+``image_raw/compressed`` (sensor_msgs/CompressedImage) instead, named and formatted as
+image_transport's ``compressed`` plugin does: the resolved ``image_raw`` plus ``/compressed``,
+format ``"<encoding>; jpeg compressed bgr8"`` (or ``png``), with the plugin's parameter names
+``image_raw.compressed.format``, ``.jpeg_quality`` and ``.png_level``.
+
+A lens parameter set on the camera (``ros2 param set /demo_camera lens.stop_offset_mm 0.6``)
+simulates a physical change of the real lens; the user then tells ``correct_node`` the same
+values. The demo (:mod:`mechdeconv_ros.demo`) does both.
 
 Geometry: the chart is fixed in the world. Its texture is drawn at the resolution of the first
 model's corrected image and mapped with that model's ``K_new`` (normalised coordinates
@@ -24,19 +30,21 @@ model's corrected image and mapped with that model's ``K_new`` (normalised coord
 later lens (another focal length, stop offset) therefore sees the same chart at another scale
 and distortion, as a real camera would.
 
-Publishing follows docs/design.md section 4.4 (pixels in and out of rclpy): one ``Image``
-per size and encoding, ``data`` set once to ``array.array('B', bytes(n))`` and written through
-a numpy view (:func:`mechdeconv_ros.image_msgs.new_output_image`). The chart is static, so
-the pixels are rendered once per model and each tick only sets ``header.stamp`` (the publish
-time) and publishes.
+Publishing follows docs/design.md section 4.4 (pixels in and out of rclpy): one ``Image`` per
+size and encoding, ``data`` set once to ``array.array('B', bytes(n))`` and written through a
+numpy view (:func:`mechdeconv_ros.image_msgs.new_output_image`). The chart is static, so the
+pixels are rendered (and compressed) once per model and each tick only sets ``header.stamp``
+(the publish time) and publishes.
 """
 
 from __future__ import annotations
 
+import array
 import sys
 from typing import Any, Sequence
 
 import cv2
+from mechdeconv_ros.compressed import CODECS, DEFAULT_JPEG_QUALITY, DEFAULT_PNG_LEVEL, encode
 from mechdeconv_ros.image_msgs import ImageFormatError, new_output_image, OutputImage
 from mechdeconv_ros.model import build_model, LensModel, ModelError
 from mechdeconv_ros.params import check_values, load_params_file, ParamSpec, SCHEMA
@@ -53,6 +61,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
+from sensor_msgs.msg import CompressedImage
 
 #: Schema groups the camera declares: what defines the lens, the sensor and the scene.
 CAMERA_GROUPS = ('lens', 'sensor', 'scene')
@@ -60,6 +69,10 @@ CAMERA_GROUPS = ('lens', 'sensor', 'scene')
 WALL = 40
 #: Encodings the camera renders (8 bits per channel, and mono16 scaled from mono8).
 CAMERA_ENCODINGS = ('rgb8', 'bgr8', 'rgba8', 'bgra8', 'mono8', 'mono16')
+#: What the camera publishes: ``image_raw`` (raw) or ``image_raw/compressed`` (compressed).
+TRANSPORTS = ('raw', 'compressed')
+#: Parameter prefix of the compressed output, as image_transport names it for image_raw.
+COMPRESSED_PREFIX = 'image_raw.compressed.'
 
 
 def camera_specs() -> tuple[ParamSpec, ...]:
@@ -182,8 +195,9 @@ class DemoCamera(Node):
     Publish ``image_raw`` rendered through a lens model; rebuild on a lens parameter set.
 
     Parameters: ``width``, ``height``, ``encoding``, ``rate_hz``, ``frame_id``,
-    ``params_file`` (read once at start-up; its values become the defaults of the lens
-    parameters) and the schema's ``lens.*``, ``sensor.*`` and ``scene.*``.
+    ``transport`` (read once at start-up), ``image_raw.compressed.{format, jpeg_quality,
+    png_level}``, ``params_file`` (read once at start-up; its values become the defaults of the
+    lens parameters) and the schema's ``lens.*``, ``sensor.*`` and ``scene.*``.
     """
 
     def __init__(self, **kwargs: Any) -> None:
@@ -195,7 +209,8 @@ class DemoCamera(Node):
         :raises ModelError: when the start-up parameters describe no camera.
         :raises ValueError: when ``params_file`` cannot be read or another parameter is bad.
         """
-        self._pending: tuple[dict[str, Any], LensModel | None, OutputImage | None] | None = None
+        self._pending: tuple[dict[str, Any], LensModel | None, OutputImage | None,
+                             CompressedImage | None] | None = None
         super().__init__('demo_camera', **kwargs)
         self._declare(
             'params_file', '', 'ROS 2 params file whose lens.*, sensor.* and scene.* values are '
@@ -213,13 +228,35 @@ class DemoCamera(Node):
         self._declare('frame_id', 'camera_optical_frame',
                       'header.frame_id of the images (REP-103 optical frame).',
                       ParameterType.PARAMETER_STRING)
+        self._declare('transport', 'raw', 'raw: publish image_raw (sensor_msgs/Image); '
+                      'compressed: publish image_raw/compressed (sensor_msgs/CompressedImage) '
+                      'as image_transport does. Read once at start-up.',
+                      ParameterType.PARAMETER_STRING, read_only=True)
+        self._declare(COMPRESSED_PREFIX + 'format', 'jpeg', 'Codec of the compressed output: '
+                      'jpeg or png.', ParameterType.PARAMETER_STRING)
+        self._declare(COMPRESSED_PREFIX + 'jpeg_quality', DEFAULT_JPEG_QUALITY,
+                      'JPEG quality of the compressed output (1-100).',
+                      ParameterType.PARAMETER_INTEGER, int_range=(1, 100))
+        self._declare(COMPRESSED_PREFIX + 'png_level', DEFAULT_PNG_LEVEL,
+                      'PNG compression level of the compressed output (0-9).',
+                      ParameterType.PARAMETER_INTEGER, int_range=(0, 9))
+        self._transport = str(self.get_parameter('transport').value)
+        if self._transport not in TRANSPORTS:
+            raise ValueError(f"transport: '{self._transport}' is not one of "
+                             f"{', '.join(TRANSPORTS)}")
         base = self._file_values(str(self.get_parameter('params_file').value))
         self._values = self._current_values(declare_schema(self, camera_specs(), base))
         self._model = self._build(self._values)
         self._chart = Chart(self._model)
         self._out = self._render(self._model, self._values)
+        self._compressed = self._compress(self._out, self._values)
+        # image_transport's name: the RESOLVED base topic plus /compressed, so a remapping of
+        # image_raw moves the compressed topic with it.
+        topic = ('image_raw' if self._compressed is None
+                 else self.resolve_topic_name('image_raw') + '/compressed')
         self._publisher = self.create_publisher(
-            type(self._out.msg), 'image_raw', qos_profile_sensor_data,
+            type(self._out.msg) if self._compressed is None else CompressedImage, topic,
+            qos_profile_sensor_data,
             qos_overriding_options=QoSOverridingOptions.with_default_policies())
         self._timer = self.create_timer(1.0 / float(self._values['rate_hz']), self._tick)
         self.add_on_set_parameters_callback(self._on_set)
@@ -252,8 +289,9 @@ class DemoCamera(Node):
             raise ValueError(f'params_file: cannot read {path}: {err.strerror}') from None
 
     def _current_values(self, lens_values: dict[str, Any]) -> dict[str, Any]:
-        values = {name: self.get_parameter(name).value
-                  for name in ('width', 'height', 'encoding', 'rate_hz', 'frame_id')}
+        names = ['width', 'height', 'encoding', 'rate_hz', 'frame_id']
+        names += [COMPRESSED_PREFIX + name for name in ('format', 'jpeg_quality', 'png_level')]
+        values = {name: self.get_parameter(name).value for name in names}
         values.update(lens_values)
         return values
 
@@ -271,6 +309,10 @@ class DemoCamera(Node):
                 raise ModelError(f'sensor.{axis}_px',
                                  f'{sensor} px differs from the camera {axis} {size} px: set '
                                  f'both (or sensor.{axis}_px to 0)')
+        if values[COMPRESSED_PREFIX + 'format'] not in CODECS:
+            raise ModelError(COMPRESSED_PREFIX + 'format',
+                             f"'{values[COMPRESSED_PREFIX + 'format']}' is not one of "
+                             f"{', '.join(CODECS)}")
         if values['encoding'] not in CAMERA_ENCODINGS:
             raise ModelError('encoding', f"'{values['encoding']}' is not one of "
                                          f"{', '.join(CAMERA_ENCODINGS)}")
@@ -282,6 +324,20 @@ class DemoCamera(Node):
         np.copyto(out.pixels, convert_rgb(self._chart.render(model), str(values['encoding'])))
         out.msg.header.frame_id = str(values['frame_id'])
         return out
+
+    def _compress(self, out: OutputImage, values: dict[str, Any]) -> CompressedImage | None:
+        """Return ``out`` compressed as image_transport would (None: transport raw)."""
+        if self._transport != 'compressed':
+            return None
+        codec = str(values[COMPRESSED_PREFIX + 'format'])
+        fmt, data = encode(out.pixels, out.msg.encoding, codec,
+                           jpeg_quality=int(values[COMPRESSED_PREFIX + 'jpeg_quality']),
+                           png_level=int(values[COMPRESSED_PREFIX + 'png_level']))
+        msg = CompressedImage()
+        msg.header.frame_id = out.msg.header.frame_id
+        msg.format = fmt
+        msg.data = array.array('B', data)
+        return msg
 
     def _on_set(self, parameters: list[Parameter]) -> SetParametersResult:
         """Validate a set by building (and rendering) the candidate; never raises."""
@@ -295,23 +351,26 @@ class DemoCamera(Node):
             check_values(self._model_values(candidate))
             model = self._build(candidate) if rebuild else None
             out = self._render(model, candidate) if model is not None else None
+            compressed = self._compress(out, candidate) if out is not None else None
         except (ValueError, ImageFormatError) as err:
             return SetParametersResult(successful=False, reason=str(err))
-        self._pending = (candidate, model, out)
+        self._pending = (candidate, model, out, compressed)
         return SetParametersResult(successful=True)
 
     def _post_set(self, parameters: list[Parameter]) -> None:
         """Swap in the candidate validated by :meth:`_on_set`."""
         if self._pending is None:
             return
-        candidate, model, out = self._pending
+        candidate, model, out, compressed = self._pending
         self._pending = None
         rate_changed = candidate['rate_hz'] != self._values['rate_hz']
         self._values = candidate
         if model is not None and out is not None:
-            self._model, self._out = model, out
+            self._model, self._out, self._compressed = model, out, compressed
             self._log_model('lens changed')
         self._out.msg.header.frame_id = str(candidate['frame_id'])
+        if self._compressed is not None:
+            self._compressed.header.frame_id = str(candidate['frame_id'])
         if rate_changed:
             self._timer.cancel()
             self.destroy_timer(self._timer)
@@ -319,8 +378,11 @@ class DemoCamera(Node):
 
     def _log_model(self, what: str) -> None:
         model = self._model
+        transport = ('' if self._compressed is None
+                     else f' ({self._compressed.format}, {len(self._compressed.data)} bytes)')
         self.get_logger().info(
-            f"{what}: image_raw {model.width}x{model.height} {self._values['encoding']} at "
+            f"{what}: image_raw {model.width}x{model.height} {self._values['encoding']}"
+            f'{transport} at '
             f"{float(self._values['rate_hz']):g} Hz through f = {model.focal_length_mm:.4g} mm, "
             f"t = {float(self._values['lens.thickness_mm']):g} mm, stop offset "
             f"{float(self._values['lens.stop_offset_mm']):g} mm (max displacement "
@@ -331,7 +393,7 @@ class DemoCamera(Node):
     # ----------------------------------------------------------------------------------------
 
     def _tick(self) -> None:
-        msg = self._out.msg
+        msg = self._out.msg if self._compressed is None else self._compressed
         msg.header.stamp = self.get_clock().now().to_msg()
         self._publisher.publish(msg)
 

@@ -22,15 +22,21 @@ from rcl_interfaces.srv import SetParametersAtomically
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
 
 class Monitor(Node):
     """Subscribes to the node's outputs and keeps what the demo prints and saves."""
 
-    def __init__(self) -> None:
-        """Create the subscriptions and the parameter clients."""
+    def __init__(self, transport: str = 'raw') -> None:
+        """
+        Create the subscriptions and the parameter clients.
+
+        :param transport: what the camera publishes: ``raw`` (image_raw) or ``compressed``
+            (image_raw/compressed); :meth:`grab_raw` takes a frame from there.
+        """
         super().__init__('mechdeconv_demo')
+        self.transport = transport
         self.lock = threading.Lock()
         self.frames: list[tuple[float, float]] = []     # (receive monotonic s, latency ms)
         self.last_rect: Image | None = None
@@ -41,7 +47,7 @@ class Monitor(Node):
         self.diag: dict[str, str] = {}
         self.diag_message = ''
         self.frames_in: list[tuple[float, int]] = []    # (receive monotonic s, node input)
-        self.raw_wanted: list[Image] = []
+        self.raw_wanted: list[Image | CompressedImage] = []
         qos = qos_profile_sensor_data
         self.create_subscription(Image, 'image_rect', self._on_rect, qos)
         self.create_subscription(CameraInfo, 'camera_info', self._on_info, qos)
@@ -75,7 +81,7 @@ class Monitor(Node):
                     if self.diag.get('frames_in', '').isdigit():
                         self.frames_in.append((time.monotonic(), int(self.diag['frames_in'])))
 
-    def _on_raw(self, msg: Image) -> None:
+    def _on_raw(self, msg: Image | CompressedImage) -> None:
         with self.lock:
             self.raw_wanted.append(msg)
 
@@ -84,19 +90,21 @@ class Monitor(Node):
         with self.lock:
             self.d_changed_from, self.d_changed_at = self.info_d, None
 
-    def grab_raw(self, timeout_s: float) -> Image:
+    def grab_raw(self, timeout_s: float) -> Image | CompressedImage:
         """
-        Subscribe to image_raw until one frame arrives.
+        Subscribe to image_raw (or image_raw/compressed) until one frame arrives.
 
         :param timeout_s: how long to wait.
         :return: the frame.
         """
         with self.lock:
             self.raw_wanted = []
-        sub = self.create_subscription(Image, 'image_raw', self._on_raw,
-                                       qos_profile_sensor_data)
+        compressed = self.transport == 'compressed'
+        topic = self.resolve_topic_name('image_raw') + ('/compressed' if compressed else '')
+        sub = self.create_subscription(CompressedImage if compressed else Image, topic,
+                                       self._on_raw, qos_profile_sensor_data)
         try:
-            wait_for(lambda: bool(self.raw_wanted), timeout_s, 'a frame on image_raw')
+            wait_for(lambda: bool(self.raw_wanted), timeout_s, f'a frame on {topic}')
             with self.lock:
                 return self.raw_wanted[-1]
         finally:

@@ -22,7 +22,8 @@ _T0 = time.monotonic()
 #: The node's diagnostics the demo prints, in this order.
 DIAGNOSTIC_KEYS = ('model_revision', 'last_rebuild_ms', 'focal_length_mm', 'distortion_model',
                    'D', 'fit_rms_px', 'max_displacement_px', 'frames_in', 'frames_out',
-                   'frames_dropped', 'frame_time_ms_mean', 'frame_time_ms_max')
+                   'frames_dropped', 'frame_time_ms_mean', 'frame_time_ms_max',
+                   'decode_time_ms_mean', 'frames_undecodable')
 
 
 class DemoError(Exception):
@@ -50,13 +51,18 @@ def stamp_ns(stamp: Any) -> int:
 
 def to_bgr(msg: Any) -> np.ndarray:
     """
-    Copy a sensor_msgs/Image into a BGR (or grey) array that cv2.imwrite takes.
+    Copy a sensor_msgs/Image (or decode a CompressedImage) into a BGR or grey array.
 
-    :param msg: the Image.
-    :return: ``(H, W, 3)`` or ``(H, W)`` uint8/uint16.
+    :param msg: the Image or CompressedImage.
+    :return: ``(H, W, 3)`` or ``(H, W)`` uint8/uint16, as cv2.imwrite takes it.
     """
-    from mechdeconv_ros.image_msgs import image_to_array
-    pixels, encoding = image_to_array(msg)
+    if hasattr(msg, 'format'):
+        from mechdeconv_ros.compressed import decode
+        decoded = decode(msg.format, msg.data)
+        pixels, encoding = decoded.pixels, decoded.encoding
+    else:
+        from mechdeconv_ros.image_msgs import image_to_array
+        pixels, encoding = image_to_array(msg)
     conversions = {'rgb8': cv2.COLOR_RGB2BGR, 'rgba8': cv2.COLOR_RGBA2BGR,
                    'bgra8': cv2.COLOR_BGRA2BGR}
     if encoding.name in conversions:

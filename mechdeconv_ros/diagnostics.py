@@ -7,7 +7,11 @@ The status is named after the node's fully qualified name (``/left/correct_node:
 correction``), so two cameras' nodes are told apart. Its values are the model revision and
 rebuild counters (:class:`mechdeconv_ros.live_model.LiveStatus`), the frame counters and
 timings (:class:`FrameStats`, per diagnostics period) and the lens summary
-(``LensModel.report()`` flattened to dotted keys, e.g. ``fov_deg.horizontal``). Level: ERROR
+(``LensModel.report()`` flattened to dotted keys, e.g. ``fov_deg.horizontal``). The input is
+named by ``image_transport`` and ``input_topic``; with compressed input, ``frames_undecodable``
+counts refused payloads and ``decode_time_ms_{mean,max,last}`` time the JPEG/PNG decoding
+(included in ``frame_time_ms_*``); ``frames_out_compressed`` counts the frames published on
+``image_rect/compressed``. Level: ERROR
 while the last rebuild failed (the previous model stays in use), WARN for the model's warnings
 or frames that all fail, OK otherwise.
 """
@@ -39,6 +43,29 @@ class FrameStats:
         self.frame_ms_max = 0.0         # since the last diagnostics message
         self.frame_ms_sum = 0.0         # since the last diagnostics message
         self.frame_count = 0            # since the last diagnostics message
+        self.image_transport = 'raw'
+        self.input_topic = ''
+        self.frames_undecodable = 0
+        self.frames_out_compressed = 0
+        self.decode_ms_last = math.nan
+        self.decode_ms_max = 0.0        # since the last diagnostics message
+        self.decode_ms_sum = 0.0        # since the last diagnostics message
+        self.decode_count = 0           # since the last diagnostics message
+
+    def add_decode_time(self, ms: float) -> None:
+        """Record the decoding time of one compressed frame."""
+        self.decode_ms_last = ms
+        self.decode_ms_max = max(self.decode_ms_max, ms)
+        self.decode_ms_sum += ms
+        self.decode_count += 1
+
+    def take_decode_period(self) -> tuple[float, float]:
+        """Return ``(mean ms, max ms)`` of decoding since the last call; restart the period."""
+        count = self.decode_count
+        mean = self.decode_ms_sum / count if count else math.nan
+        peak = self.decode_ms_max if count else math.nan
+        self.decode_ms_sum, self.decode_ms_max, self.decode_count = 0.0, 0.0, 0
+        return mean, peak
 
     def add_time(self, ms: float) -> None:
         """Record the processing time of one published frame."""
@@ -93,7 +120,16 @@ def diagnostics_message(node: Node, live: LiveStatus, stats: FrameStats,
         'frame_time_ms_max': max_ms,
         'frame_time_ms_last': stats.frame_ms_last,
         'last_error': stats.last_error,
+        'image_transport': stats.image_transport,
+        'input_topic': stats.input_topic,
+        'frames_out_compressed': stats.frames_out_compressed,
     }
+    if stats.image_transport == 'compressed':
+        decode_mean, decode_max = stats.take_decode_period()
+        entries.update({'frames_undecodable': stats.frames_undecodable,
+                        'decode_time_ms_mean': decode_mean,
+                        'decode_time_ms_max': decode_max,
+                        'decode_time_ms_last': stats.decode_ms_last})
     status = DiagnosticStatus(name=status_name(node), hardware_id='')
     warnings: list[str] = []
     summary_pending = live.active is not None and live.report is None

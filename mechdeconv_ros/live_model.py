@@ -45,7 +45,12 @@ Threading rule (the one rule; every shared field follows it):
 Every field that both threads use is read and written under the one lock (a Condition),
 except the ``active`` reference, which a frame reads once without the lock (one atomic read;
 the record is immutable), so a frame never mixes two models. Fields only one thread uses
-(``_failed_build``: executor; ``_warmed_size``: rebuild thread) need no lock.
+(``_failed_build``: executor; ``_warmed_size``, ``_logged_warnings``: rebuild thread, after
+the constructor) need no lock.
+
+Warnings: a model's warnings (unusual but possible values, docs/design.md section 7, and the
+summary's depth-of-field and valid-field notes) go to ``log`` once, when they appear: the start-up
+model's in the constructor, later ones when the rebuild thread summarises a new model.
 """
 
 from __future__ import annotations
@@ -209,11 +214,24 @@ class LiveModel:
         self._warmed_size: tuple[int, int] | None = None          # rebuild thread only
         self._thread: threading.Thread | None = None
         self.startup_model = self._build_model(self._values, *self._validation_size())
+        # Warnings (unusual but possible values) are logged once, when they appear: those of
+        # the start-up values now, later ones when the rebuild thread summarises a new model.
+        self._logged_warnings: tuple[str, ...] = tuple(
+            getattr(self.startup_model, 'warnings', ()))           # rebuild thread after start
+        for warning in self._logged_warnings:
+            self._say('warning', warning)
         if sensor_size_fixed(self._values):
             # The size is known: build the maps now, so the first frame is not late.
             with self._lock:
                 self._input_size = _size_of_model(self.startup_model)
                 self._install_locked(self._finish(self.startup_model, 0, 0.0))
+
+    def _say(self, level: str, message: str) -> None:
+        """Log through the injected function; a failing logger must not stop a thread."""
+        try:
+            self._log(level, message)
+        except Exception:           # noqa: B902 - logging is never worth a dead thread
+            pass
 
     # -- parameters (executor thread) ----------------------------------------------------------
 
@@ -329,7 +347,7 @@ class LiveModel:
                     self._input_size = previous_size
             self._failed_build = (generation, width, height)
             raise FrameDropped('build', f'no model for {width}x{height} px: {err}') from err
-        self._log('info', f'input is {width}x{height} px: model built in '
+        self._say('info', f'input is {width}x{height} px: model built in '
                           f'{candidate.build_ms:.1f} ms')
         with self._lock:
             if self._input_size != (width, height):
@@ -433,7 +451,7 @@ class LiveModel:
             with self._lock:
                 self._rebuild_failures += 1
                 self._rebuild_error = str(err)
-            self._log('error', f'rebuild failed, the previous model stays in use: {err}')
+            self._say('error', f'rebuild failed, the previous model stays in use: {err}')
             return
         with self._lock:
             if self._input_size is not None and self._input_size != size:
@@ -454,10 +472,17 @@ class LiveModel:
         try:
             report = active.model.report()
         except Exception as err:    # noqa: B902 - a summary must not stop the rebuilds
-            self._log('warning', f'model summary failed: {err!r}')
+            self._say('warning', f'model summary failed: {err!r}')
             return
         with self._lock:
             self._report = (active.revision, report)
+        # Log each warning once: not again for the next model that still has it (another
+        # frame size, an unrelated parameter), again if it goes away and comes back.
+        warnings = tuple(report.get('warnings', ()))
+        for warning in warnings:
+            if warning not in self._logged_warnings:
+                self._say('warning', warning)
+        self._logged_warnings = warnings
 
     def _warm_allocator(self, active: ActiveModel | None) -> None:
         """
@@ -476,7 +501,7 @@ class LiveModel:
         try:
             self._build_maps(active.model)
         except Exception as err:    # noqa: B902 - an optimisation must never stop the thread
-            self._log('warning', f'allocator warm-up failed: {err!r}')
+            self._say('warning', f'allocator warm-up failed: {err!r}')
 
     # -- building and installing (either thread) -----------------------------------------------
 

@@ -36,6 +36,12 @@ The model (Lim & Furukawa 2008, with the distortion traced instead of approximat
    most 85 deg) or an ideal fisheye (``equidistant``, ``rho_ideal = v theta``, any field, past
    90 deg for a scene at infinity). Where the real height folds back or a ray fails the valid
    field ends (a fold is reported as a warning).
+7. Before any of it, :func:`build_model` refuses a parameter set that describes no camera that
+   can exist (a focus distance inside f, a stop behind the image plane or in front of the
+   scene, an aperture wider than the surfaces, crossing surfaces, an image inside the glass, a
+   circle of confusion wider than the sensor) with a :class:`ModelError` that names the
+   parameter and the limit, and notes unusual but possible values (a far stop, f/0.7) in
+   ``LensModel.warnings``. The rules and their formulas: docs/design.md section 7.
 
 Pixel coordinates follow OpenCV and ROS (REP-103 optical frame): x right, y down, origin at the
 centre of the top-left pixel.
@@ -53,8 +59,7 @@ from mechdeconv_ros.optics import biconvex_for_focal_length, propagate_sigma, th
 from mechdeconv_ros.params import (
     ASPHERE_POWERS, check_values, INTERPOLATIONS, MAX_FRAME_PIXELS, ParamValue)
 from mechdeconv_ros.raytrace import (
-    image_plane, paraxial, Prescription, Surface, trace_chief_rays, trace_field_angles,
-    vertex_z)
+    image_plane, paraxial, Prescription, Surface, trace_field, trace_field_angles, vertex_z)
 from mechdeconv_ros.surfaces import domain_limit_mm
 import numpy as np
 import numpy.typing as npt
@@ -62,6 +67,9 @@ import yaml
 
 FloatArray = npt.NDArray[np.float64]
 
+#: Samples of the angle-uniform trace that finds the field, K_new and the equivalent
+#: calibration (its linear interpolation is good to ~1e-7 rad; it also guides the dense trace).
+COARSE_SAMPLES = 512
 #: Samples of the radial map (at least 1024 from 0 to past the output corner: docs/design.md
 #: section 2.5).
 CURVE_SAMPLES = 2048
@@ -114,6 +122,7 @@ class RadialMap:
     real_mm: FloatArray
     field_angle_rad: FloatArray | None = None
     folded: bool = False
+    aim_offsets: FloatArray | None = None
 
     @property
     def valid_ideal_mm(self) -> float:
@@ -192,6 +201,9 @@ class LensModel:
     equivalent_max_error_px: float
     equivalent_fits: tuple[EquivalentFit, ...]
     interpolation: int
+    #: Physically possible but unusual values (a stop far from the lens, f/0.7 or faster),
+    #: found while building; the summary's ``warnings`` start with them.
+    warnings: tuple[str, ...] = ()
     projection: str = 'pinhole'
     field_curve: RadialMap | None = None
     _summary_cache: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
@@ -393,7 +405,9 @@ def _surface_prescription(values: Mapping[str, Any]) -> Prescription:
                                              arrays['semi_diameter_mm'])))
     for i, surface in enumerate(surfaces):
         limit = domain_limit_mm(surface)
-        if 0.0 < surface.semi_diameter_mm and limit < surface.semi_diameter_mm:
+        # (A sphere wider than its hemisphere is the semi-diameter's fault: checked below.)
+        if surface.conic != 0.0 and 0.0 < surface.semi_diameter_mm and \
+                limit < surface.semi_diameter_mm:
             raise ModelError('lens.surfaces.conic',
                              f'surface {i}: k = {surface.conic:g} with radius '
                              f'{surface.radius_mm:g} mm leaves the sag undefined beyond r = '
@@ -443,20 +457,22 @@ def _image_size(values: Mapping[str, Any], width: int, height: int) -> tuple[int
 
 
 def _trace_curve(prescription: Prescription, distance: float, sensor_z: float, v: float,
-                 ideal_max_mm: float, samples: int, projection: str = 'pinhole') -> RadialMap:
+                 ideal_max_mm: float, samples: int, projection: str = 'pinhole',
+                 guide: RadialMap | None = None) -> RadialMap:
     """
     Trace ``samples`` chief rays from 0 to ``ideal_max_mm`` and keep the valid prefix.
 
     The ideal heights are uniform in the projection: v tan(theta) for ``pinhole``, v theta for
-    ``equidistant`` (which reaches past 90 deg for a scene at infinity).
+    ``equidistant`` (which reaches past 90 deg for a scene at infinity). A ``guide`` (an
+    earlier curve of the same lens and scene) starts the ray aiming from its solutions.
     """
     ideal = np.linspace(0.0, ideal_max_mm, samples)
-    if projection == 'pinhole':
-        real = -trace_chief_rays(prescription, distance, sensor_z, ideal / v)
-        theta = np.arctan(ideal / v)
-    else:
-        theta = ideal / v
-        real = -trace_field_angles(prescription, distance, sensor_z, theta)
+    theta = np.arctan(ideal / v) if projection == 'pinhole' else ideal / v
+    known = None
+    if guide is not None and guide.aim_offsets is not None:
+        known = (guide.field_angle_rad, guide.aim_offsets)
+    real, offsets = trace_field(prescription, distance, sensor_z, theta, known)
+    real = -real
     good = np.isfinite(real)
     rising = np.ones_like(good)
     rising[1:] = np.diff(real) > 0.0
@@ -464,7 +480,53 @@ def _trace_curve(prescription: Prescription, distance: float, sensor_z: float, v
     # The valid field is the prefix up to the first failed ray or the first non-increase.
     end = int(np.argmin(good)) if not good.all() else samples
     folded = end < samples and bool(np.isfinite(real[end])) and not rising[end]
-    return RadialMap(ideal[:end], real[:end], theta[:end], folded)
+    return RadialMap(ideal[:end], real[:end], theta[:end], folded, offsets[:end])
+
+
+def _resample(field: RadialMap, v: float, ideal_max_mm: float, samples: int,
+              projection: str) -> RadialMap:
+    """
+    Return the radial map in a projection, uniform in its ideal height, from the field trace.
+
+    The real heights at the new field angles are the cubic Hermite interpolation of the
+    angle-uniform trace, with slopes from fourth-order differences: on every lens we tried
+    (Case 2 to 4000x3000 px, aspheric double Gauss, fisheyes to 102 deg) within 2e-7 px of
+    tracing those angles exactly, at a quarter of the cost (the map needs no more rays).
+    """
+    ideal = np.linspace(0.0, ideal_max_mm, samples)
+    theta = np.arctan(ideal / v) if projection == 'pinhole' else ideal / v
+    inside = theta <= field.max_field_angle_rad
+    real = np.full(samples, np.nan)
+    real[inside] = hermite(field.field_angle_rad, field.real_mm, theta[inside])
+    good = np.isfinite(real)
+    good[1:] &= np.diff(real) > 0.0
+    end = int(np.argmin(good)) if not good.all() else samples
+    return RadialMap(ideal[:end], real[:end], theta[:end], field.folded and end == samples)
+
+
+def hermite(x: FloatArray, y: FloatArray, query: FloatArray) -> FloatArray:
+    """
+    Interpolate uniformly spaced samples by cubic Hermite with fourth-order slopes.
+
+    :param x: uniformly spaced abscissae (at least 5), increasing.
+    :param y: values.
+    :param query: where to interpolate, within ``[x[0], x[-1]]``.
+    :return: the interpolated values (error O(h^4)).
+    """
+    h = float(x[1] - x[0])
+    n = y.size
+    d = np.empty(n)
+    d[2:-2] = (y[:-4] - 8.0 * y[1:-3] + 8.0 * y[3:-1] - y[4:]) / (12.0 * h)
+    d[0] = (-25.0 * y[0] + 48.0 * y[1] - 36.0 * y[2] + 16.0 * y[3] - 3.0 * y[4]) / (12.0 * h)
+    d[1] = (-3.0 * y[0] - 10.0 * y[1] + 18.0 * y[2] - 6.0 * y[3] + y[4]) / (12.0 * h)
+    d[-1] = (25.0 * y[-1] - 48.0 * y[-2] + 36.0 * y[-3] - 16.0 * y[-4] + 3.0 * y[-5]) / (12.0 * h)
+    d[-2] = (3.0 * y[-1] + 10.0 * y[-2] - 18.0 * y[-3] + 6.0 * y[-4] - y[-5]) / (12.0 * h)
+    k = np.clip(((query - x[0]) / h).astype(np.int64), 0, n - 2)
+    t = (query - x[k]) / h
+    t2 = t * t
+    t3 = t2 * t
+    return ((2.0 * t3 - 3.0 * t2 + 1.0) * y[k] + (t3 - 2.0 * t2 + t) * h * d[k]
+            + (3.0 * t2 - 2.0 * t3) * y[k + 1] + (t3 - t2) * h * d[k + 1])
 
 
 def _projected(theta: FloatArray, projection: str) -> FloatArray:
@@ -634,19 +696,31 @@ def _fit_model(name: str, theta: FloatArray, target: FloatArray,
     weights = np.ones(theta.size)
     row_scale = np.ones(theta.size)
     best, best_error = None, math.inf
+    ridge = 0.0
     for _ in range(LAWSON_PASSES):
         w = np.sqrt(weights) * row_scale * scale
-        coef, *_ = np.linalg.lstsq(basis * w[:, None], rhs * w, rcond=None)
+        matrix = basis * w[:, None]
+        while True:
+            coef = _ridge_lstsq(matrix, rhs * w, ridge * float(np.sum(w * w)))
+            if name != 'rational_polynomial':
+                break
+            den = 1.0 + powers @ (coef[3:] / norms[3:])
+            if np.all(den > 0) or ridge >= 1e-2:
+                break
+            # A pole inside the field: the equation-error fit is ill-conditioned here;
+            # damp it (ridge regression) until the denominator stays positive.
+            ridge = max(100.0 * ridge, 1e-12)
         if not np.all(np.isfinite(coef)):
             break
         if name == 'rational_polynomial':
-            den = 1.0 + powers @ (coef[3:] / norms[3:])
             if not np.all(den > 0):
                 break
             row_scale = 1.0 / den
+            # Reweighted by 1/den the fit is better conditioned: relax the damping again.
+            ridge = ridge / 100.0 if ridge > 1e-12 else 0.0
         residual = np.abs(basis @ coef - rhs) * row_scale
         worst = float(np.max(residual))
-        if worst * scale <= 0.5 * EQUIVALENT_MAX_ERROR_PX:
+        if worst * scale <= 0.1 * EQUIVALENT_MAX_ERROR_PX:
             best = coef / norms
             break       # well within the bound: the minimax refinement is not needed
         if worst < best_error:
@@ -668,6 +742,15 @@ def _fit_model(name: str, theta: FloatArray, target: FloatArray,
     if name == 'rational_polynomial':
         return (c[0], c[1], 0.0, 0.0, c[2], c[3], c[4], c[5])
     return tuple(c)
+
+
+def _ridge_lstsq(matrix: FloatArray, rhs: FloatArray, damping: float) -> FloatArray:
+    """Solve min |A x - b|^2 + damping |x|^2 (plain least squares for damping 0)."""
+    if damping > 0.0:
+        size = matrix.shape[1]
+        matrix = np.vstack([matrix, math.sqrt(damping) * np.eye(size)])
+        rhs = np.concatenate([rhs, np.zeros(size)])
+    return np.linalg.lstsq(matrix, rhs, rcond=None)[0]
 
 
 def choose_equivalent(fits: list[EquivalentFit]) -> EquivalentFit:
@@ -741,9 +824,11 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0) -> L
         sensor_z, v = image_plane(prescription, distance)
     except ValueError as err:
         raise ModelError('scene.distance_mm', str(err)) from None
+    warnings = _check_physical(vals, prescription, para, distance, sensor_z)
     w, h, ow, oh = _image_size(vals, width, height)
     px = float(vals['sensor.pixel_size_x_um']) * 1e-3
     py = float(vals['sensor.pixel_size_y_um']) * 1e-3
+    _check_circle_of_confusion(vals, f, w * px, h * py)
     fx, fy = v / px, v / py
     K = np.array([[fx, 0.0, (w - 1) / 2.0], [0.0, fy, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
 
@@ -755,9 +840,9 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0) -> L
     edge_real = math.hypot(w / 2.0 * px, h / 2.0 * py)
     theta_max = min(cap, 1.5 * edge_real / v)
     for _ in range(12):
-        coarse = _trace_curve(prescription, distance, sensor_z, v, theta_max * v, 1024,
+        coarse = _trace_curve(prescription, distance, sensor_z, v, theta_max * v, COARSE_SAMPLES,
                               'equidistant')
-        if (coarse.ideal_mm.size < 1024 or coarse.valid_real_mm >= 1.05 * edge_real
+        if (coarse.ideal_mm.size < COARSE_SAMPLES or coarse.valid_real_mm >= 1.05 * edge_real
                 or theta_max >= cap):
             break
         theta_max = min(cap, 2.0 * theta_max)
@@ -788,7 +873,7 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0) -> L
     out_corner = math.hypot(ow / 2.0 / (k * fx), oh / 2.0 / (k * fy)) * v
     raw_corner_ideal = float(np.nanmax(ratio * b_real)) * v
     reach = min(1.02 * max(out_corner, raw_corner_ideal), disk * v * 1.001)
-    curve = _trace_curve(prescription, distance, sensor_z, v, reach, CURVE_SAMPLES, projection)
+    curve = _resample(coarse, v, reach, CURVE_SAMPLES, projection)
 
     fits = fit_equivalent(coarse, v, K, w, h)
     chosen = choose_equivalent(fits)
@@ -803,7 +888,7 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0) -> L
         equivalent_fits=tuple(fits),
         max_displacement_px=max_disp,
         interpolation=CV_INTERPOLATION[str(vals['output.interpolation'])],
-        projection=projection, field_curve=coarse)
+        projection=projection, field_curve=coarse, warnings=tuple(warnings))
     return model
 
 
@@ -811,6 +896,312 @@ def _field_cap_rad(distance: float) -> float:
     """Return the largest field angle traced for a scene at ``distance`` (rad)."""
     return math.radians(MAX_FIELD_DEG_INFINITE if math.isinf(distance)
                         else MAX_FIELD_DEG_FINITE)
+
+
+# ---------------------------------------------------------------------------------------------
+# Physical checks: a parameter set must describe a camera that can exist (docs/design.md s. 7)
+# ---------------------------------------------------------------------------------------------
+
+#: f-numbers below this are accepted with a warning (few production lenses are faster).
+FAST_F_NUMBER = 0.7
+#: A stop farther than this many focal lengths outside the lens is accepted with a warning.
+FAR_STOP_FOCAL_LENGTHS = 1.0
+#: Relative slack of the aperture and edge-thickness limits (rounding of given values).
+LIMIT_SLACK = 1e-9
+
+
+def _rim_mm(surface: Surface) -> float:
+    """
+    Return the largest semi-aperture a surface can have (inf when unbounded).
+
+    A sphere ends at its hemisphere, ``|r|``; a conic of constant k > -1 at
+    ``1 / (|c| sqrt(1 + k))`` (where ``1 - (1 + k) c^2 a^2`` reaches 0); a flat surface, a
+    paraboloid and a hyperboloid never end. (``conic`` and ``asphere`` are read when the
+    surface has them.)
+    """
+    c = surface.curvature_per_mm
+    k = float(getattr(surface, 'conic', 0.0))
+    if c == 0.0 or 1.0 + k <= 0.0:
+        return math.inf
+    return 1.0 / (abs(c) * math.sqrt(1.0 + k))
+
+
+def _sag(surface: Surface, height_mm: float) -> float:
+    """
+    Return the sagitta of a surface at height ``a``: ``c a^2 / (1 + sqrt(1 - (1 + k) c^2 a^2))``.
+
+    For a sphere that is ``r - sign(r) sqrt(r^2 - a^2)``; even asphere terms ``a4 a^4 + ...``
+    are added when the surface has them. Beyond its rim (:func:`_rim_mm`) a surface is
+    continued by a flat bevel, so the sagitta stays at its rim value there.
+    """
+    c = surface.curvature_per_mm
+    k = float(getattr(surface, 'conic', 0.0))
+    a = min(abs(height_mm), _rim_mm(surface))
+    out = c * a * a / (1.0 + math.sqrt(max(0.0, 1.0 - (1.0 + k) * c * c * a * a)))
+    for power, coefficient in enumerate(getattr(surface, 'asphere', ()) or (), start=2):
+        out += float(coefficient) * a ** (2 * power)
+    return out
+
+
+def _is_sphere(surface: Surface) -> bool:
+    return not float(getattr(surface, 'conic', 0.0)) and not any(
+        getattr(surface, 'asphere', ()) or ())
+
+
+def _shape(surface: Surface) -> str:
+    """Name a surface's shape for a reason: 'a spherical surface of radius 4 mm'."""
+    if _is_sphere(surface):
+        return f'a spherical surface of radius {surface.radius_mm:g} mm'
+    return f'a conic surface (k = {float(getattr(surface, "conic", 0.0)):g}) of radius ' \
+           f'{surface.radius_mm:g} mm'
+
+
+def _paraxial_height(prescription: Prescription, h: float, u: float, z_end: float) -> float:
+    """
+    Return the height at the plane ``z_end`` of a paraxial ray.
+
+    The ray has height ``h`` at the first-vertex plane z = 0 and slope ``u`` in object space
+    (a line there, so ``z_end < 0`` is on it); transfers are ``y += d (n u) / n`` and
+    refractions ``n u -= (n' - n) c y`` at every vertex before ``z_end``.
+    """
+    index = prescription.object_index
+    y, nu, z = h, index * u, 0.0
+    if z_end <= 0.0:
+        return h + u * z_end
+    for z_vertex, surface, before in zip(vertex_z(prescription), prescription.surfaces,
+                                         range(len(prescription.surfaces))):
+        if z_vertex > z_end:
+            break
+        y += (float(z_vertex) - z) * nu / index
+        nu -= (surface.refractive_index - prescription.index_before(before)) \
+            * surface.curvature_per_mm * y
+        z, index = float(z_vertex), surface.refractive_index
+    return y + (z_end - z) * nu / index
+
+
+def _marginal_ray(prescription: Prescription, distance: float, front_principal_z: float
+                  ) -> tuple[float, float]:
+    """
+    Return the axial marginal ray ``(h, u)`` through the rim of a stop of unit radius.
+
+    ``lens.aperture_diameter_mm`` is the physical diameter of the stop (at
+    ``lens.stop_surface`` in prescription mode), not its image in object space: the ray leaves
+    the axial scene point (or comes parallel from infinity) and crosses the stop plane at
+    height 1. The vignetting trace clips at the same stop.
+
+    :return: height at z = 0 and object-space slope (``u`` is inf when the stop sits at an
+        image of the scene, where the axial beam has no height).
+    """
+    z_stop = prescription.stop_z_mm
+    if math.isinf(distance):
+        at_stop = _paraxial_height(prescription, 1.0, 0.0, z_stop)
+        return (1.0 / at_stop if at_stop != 0.0 else math.inf), 0.0
+    z_scene = front_principal_z - distance
+    at_stop = _paraxial_height(prescription, -z_scene, 1.0, z_stop)
+    u = 1.0 / at_stop if at_stop != 0.0 else math.inf
+    return -z_scene * u, u
+
+
+def _elements(prescription: Prescription) -> list[list[int]]:
+    """
+    Return the glass elements: runs of surfaces joined by glass (index > 1 between them).
+
+    Surfaces with the same index on both sides refract nothing (dummy planes, such as a stop
+    inside the glass) and are left out.
+    """
+    out: list[list[int]] = []
+    current: list[int] = []
+    for i, surface in enumerate(prescription.surfaces):
+        if surface.refractive_index == prescription.index_before(i):
+            continue
+        current.append(i)
+        if surface.refractive_index == 1.0:
+            if len(current) > 1:
+                out.append(current)
+            current = []
+    return out
+
+
+def _edge_crossing(surfaces: tuple[Surface, ...], z_vertices: FloatArray, element: list[int],
+                   heights: list[float], d_a: float) -> tuple[int, int, float, float] | None:
+    """
+    Return where an element's surfaces cross at its clear semi-aperture, or None.
+
+    The clear semi-aperture ``a`` is the widest of the axial beam (``heights`` per unit
+    aperture radius times ``d_a / 2``) and the given semi-diameters on the element's surfaces;
+    the edge thickness between consecutive surfaces is ``z_j + sag_j(a) - z_i - sag_i(a)``.
+
+    :return: (i, j, edge thickness, a) of the first pair that crosses.
+    """
+    semi_aperture = max(max(heights[i] * d_a / 2.0 for i in element),
+                        max(surfaces[i].semi_diameter_mm for i in element))
+    for i, j in zip(element[:-1], element[1:]):
+        edge = (float(z_vertices[j]) + _sag(surfaces[j], semi_aperture)
+                - float(z_vertices[i]) - _sag(surfaces[i], semi_aperture))
+        if edge < -LIMIT_SLACK * max(1.0, semi_aperture):
+            return i, j, edge, semi_aperture
+    return None
+
+
+def _check_physical(vals: Mapping[str, Any], prescription: Prescription, para: Any,
+                    distance: float, sensor_z: float) -> list[str]:
+    """
+    Refuse a lens that cannot exist; return warnings for an unusual one.
+
+    The rules, each with its parameter, formula and limit, are listed in docs/design.md section 7.
+
+    :raises ModelError: naming the parameter, why, and the limit.
+    :return: warnings about physically possible but unusual values.
+    """
+    f = para.efl_mm
+    prescription_mode = _is_prescription_mode(vals)
+    warnings: list[str] = []
+    # Focus distance: the same rules as the scene distance.
+    focus = float(vals['scene.focus_distance_mm'])
+    if focus > 0.0:
+        if focus <= f:
+            raise ModelError('scene.focus_distance_mm',
+                             f'{focus:g} mm is inside the focal length {f:.4g} mm: the lens '
+                             'cannot be focused there (it forms no real image of it; the '
+                             f'focus distance must be above {f:.4g} mm, or 0 = the scene '
+                             'distance)')
+        if para.front_principal_z_mm - focus >= 0.0:
+            raise ModelError('scene.focus_distance_mm',
+                             f'{focus:g} mm from the front principal plane puts the plane in '
+                             f'focus inside the lens (it must be above '
+                             f'{para.front_principal_z_mm:.4g} mm)')
+    # The image plane (the sensor) must lie behind the last surface, in air.
+    z_last = para.last_vertex_z_mm
+    if sensor_z <= z_last:
+        name = 'lens.surfaces.thickness_mm' if prescription_mode else 'lens.thickness_mm'
+        raise ModelError(name, f'the image plane falls at z = {sensor_z:.4g} mm, not behind '
+                               f'the last surface at z = {z_last:.4g} mm: the sensor would '
+                               'have to sit inside the lens (the back focal distance must be '
+                               'positive)')
+    # The stop: between the scene and the image plane.
+    z_stop = prescription.stop_z_mm
+    stop_name = _stop_param(vals)
+    stop_value = vals[stop_name]
+    if prescription_mode:
+        where = f'surface {int(vals["lens.stop_surface"])} at z = {z_stop:.4g} mm'
+    else:
+        where = f'{float(vals["lens.stop_offset_mm"]):g} mm puts the stop at z = {z_stop:.4g} mm'
+    if z_stop >= sensor_z:
+        limit = ('' if prescription_mode else
+                 f' (the offset must be above {para.front_principal_z_mm - sensor_z:.4g} mm)')
+        raise ModelError(stop_name, f'{where}, at or behind the image plane at z = '
+                                    f'{sensor_z:.4g} mm: no light reaches the sensor through '
+                                    f'an aperture behind it{limit}')
+    z_scene = para.front_principal_z_mm - distance
+    if z_stop <= z_scene:
+        limit = ('' if prescription_mode else
+                 f' (the offset must be below the scene distance {distance:g} mm)')
+        raise ModelError(stop_name, f'{where}, at or in front of the scene at z = '
+                                    f'{z_scene:.4g} mm: the aperture must lie between the '
+                                    f'scene and the lens{limit}')
+    # Clear apertures: a sphere is at most 2|r| wide; a given semi-diameter bounds its surface.
+    surfaces = prescription.surfaces
+    for i, surface in enumerate(surfaces):
+        semi, rim = surface.semi_diameter_mm, _rim_mm(surface)
+        if semi > rim * (1.0 + LIMIT_SLACK):
+            raise ModelError('lens.surfaces.semi_diameter_mm',
+                             f'surface {i}: a clear semi-diameter of {semi:g} mm is wider than '
+                             f'{_shape(surface)} can be (at most '
+                             + (f'|r| = {rim:.6g} mm, a hemisphere)' if _is_sphere(surface)
+                                else f'{rim:.6g} mm, its rim)'))
+    d_a = float(vals['lens.aperture_diameter_mm'])
+    h, u = _marginal_ray(prescription, distance, para.front_principal_z_mm)
+    if not (math.isfinite(h) and math.isfinite(u)):
+        raise ModelError(stop_name, f'{where} sits at an image of the scene (the axial beam '
+                                    'focuses there): it would bound the field, not the '
+                                    'aperture')
+    z_vertices = vertex_z(prescription)
+    # Beam heights per unit aperture radius (d_a / 2 = 1).
+    heights = [abs(_paraxial_height(prescription, h, u, float(z))) for z in z_vertices]
+    if not all(math.isfinite(y) for y in heights):
+        raise ModelError(stop_name, f'{where}: the axial beam through it cannot be traced '
+                                    '(the paraxial marginal ray overflows): the stop is at or '
+                                    'next to an image of the scene')
+    elements = _elements(prescription)
+    real = {i for element in elements for i in element}
+    bound, culprit, at = math.inf, '', 0
+    for i, surface in enumerate(surfaces):
+        semi, rim = surface.semi_diameter_mm, _rim_mm(surface)
+        if heights[i] <= 0.0:
+            continue
+        if i in real and rim / heights[i] < bound:
+            bound, at = rim / heights[i], i
+            culprit = (f'the {2 * rim:.6g} mm diameter '
+                       f'{"(2|r|) " if _is_sphere(surface) else ""}of surface {i}, '
+                       f'{_shape(surface)}')
+        if semi > 0.0 and semi / heights[i] < bound:
+            bound, at = semi / heights[i], i
+            culprit = (f'the {2 * semi:g} mm clear diameter of surface {i} (2 x '
+                       f'lens.surfaces.semi_diameter_mm[{i}])')
+    if d_a / 2.0 > bound * (1.0 + LIMIT_SLACK):
+        raise ModelError('lens.aperture_diameter_mm',
+                         f'{d_a:g} mm (stop diameter) is wider than the surfaces allow: its '
+                         f'axial beam is {d_a * heights[at]:.4g} mm wide at surface {at}, '
+                         f'wider than {culprit}; with the stop where {stop_name} = '
+                         f'{stop_value:g} puts it (z = {z_stop:.4g} mm) the largest aperture is '
+                         f'{2.0 * bound:.4g} mm (paraxial marginal ray)')
+    # Edge thickness of every glass element at its clear semi-aperture.
+    thickness_name = 'lens.surfaces.thickness_mm' if prescription_mode else 'lens.thickness_mm'
+    for element in elements:
+        crossing = _edge_crossing(surfaces, z_vertices, element, heights, d_a)
+        if crossing is None:
+            continue
+        i, j, edge, semi_aperture = crossing
+        centre = float(z_vertices[j] - z_vertices[i])
+        if _edge_crossing(surfaces, z_vertices, element, heights, 0.0) is not None:
+            smaller = 'the semi-diameters lens.surfaces.semi_diameter_mm smaller'
+        else:
+            lo, hi = 0.0, d_a   # the largest aperture with a non-negative edge, by bisection
+            for _ in range(60):
+                mid = 0.5 * (lo + hi)
+                lo, hi = (lo, mid) if _edge_crossing(surfaces, z_vertices, element, heights,
+                                                     mid) else (mid, hi)
+            smaller = f'lens.aperture_diameter_mm at most {lo:.4g} mm'
+        which = (f'the glass between surfaces {i} and {j} ({centre:g} mm thick at the '
+                 'centre)' if prescription_mode else f'the lens ({centre:g} mm thick at the '
+                 'centre)')
+        raise ModelError(thickness_name,
+                         f'{which} has an edge thickness of {edge:.4g} mm at its '
+                         f'{semi_aperture:.4g} mm clear semi-aperture: its surfaces cross '
+                         f'(t - sag1(a) + sag2(a) < 0). It must be at least '
+                         f'{centre - edge:.4g} mm thick at the centre, or {smaller}')
+    # Unusual but possible: a stop far outside the lens, a very fast aperture.
+    outside = max(-z_stop, z_stop - z_last, 0.0)
+    if outside > FAR_STOP_FOCAL_LENGTHS * f:
+        side = 'in front of the first' if z_stop < 0.0 else 'behind the last'
+        warnings.append(f'{stop_name}: the stop is {outside:.4g} mm {side} surface, farther '
+                        f'than the focal length {f:.4g} mm: an unusual design (strong '
+                        'distortion and vignetting)')
+    n_f = constraints.f_number(f, d_a, float(vals['lens.exposure_constant_q']))
+    if n_f < FAST_F_NUMBER:
+        warnings.append(f'lens.aperture_diameter_mm: f/{n_f:.3g} is faster than '
+                        f'f/{FAST_F_NUMBER:g}; few real lenses are (f/0.5 is the limit of an '
+                        'aplanatic lens in air)')
+    return warnings
+
+
+def _check_circle_of_confusion(vals: Mapping[str, Any], f: float, width_mm: float,
+                               height_mm: float) -> None:
+    """
+    Refuse a circle of confusion larger than the sensor diagonal of the model's image size.
+
+    :raises ModelError: naming ``scene.circle_of_confusion_mm``.
+    """
+    c_set = float(vals['scene.circle_of_confusion_mm'])
+    c = constraints.circle_of_confusion_mm(f, c_set)
+    diagonal = math.hypot(width_mm, height_mm)
+    if c > diagonal * (1.0 + LIMIT_SLACK):
+        value = f'{c:g} mm' if c_set > 0.0 else f'0 (0.1 % of f = {c:.4g} mm)'
+        raise ModelError('scene.circle_of_confusion_mm',
+                         f'{value} is larger than the {diagonal:.4g} mm diagonal of the '
+                         f'{width_mm:.4g} x {height_mm:.4g} mm sensor: a blur wider than the '
+                         f'image defines no depth of field (it must be at most '
+                         f'{diagonal:.4g} mm)')
 
 
 def _lens_param(values: Mapping[str, Any]) -> str:
@@ -904,7 +1295,7 @@ def _summary(model: LensModel) -> dict[str, Any]:
     focus = float(vals['scene.focus_distance_mm']) or distance
     focus = math.inf if focus == 0.0 else focus
     near, far = constraints.depth_of_field_mm(h, focus)
-    warnings = []
+    warnings = list(model.warnings)
     if not near <= distance <= far:
         warnings.append(f'scene distance {distance:g} mm is outside the depth of field '
                         f'[{near:.4g}, {far:.4g}] mm of the focus distance {focus:g} mm')
@@ -954,50 +1345,73 @@ def _summary(model: LensModel) -> dict[str, Any]:
     }
 
 
-#: Samples of the whole-field trace (the lens's own limit, for the report).
-FULL_FIELD_SAMPLES = 256
+#: Samples of the field traced beyond the sensor, to the lens's limit (for the report).
+BEYOND_SAMPLES = 128
 
 
 def _full_field(model: LensModel) -> dict[str, Any]:
     """
     Return the chief-ray curve over the whole field the lens passes, to its limit.
 
-    When the model's angle-uniform trace (``field_curve``) already ends inside its range (a
-    failed ray or a fold), that is the limit. Otherwise the field is traced from 0 to the cap
-    (179 deg at infinity, 89.5 deg for a finite scene), and the last interval refined 64
-    times, so the limit is known to about 0.01 deg.
+    The model's angle-uniform trace (``field_curve``) covers the sensor. When it ends inside
+    its range (a failed ray or a fold), the interval after its last sample is traced again 64
+    times finer; otherwise the field is traced on to the cap (179 deg at infinity, 89.5 deg
+    for a finite scene) and the interval where it ends refined likewise, so the limit is
+    known to about 1/64 of a sample step. Every trace starts its aiming from the solutions
+    already known (``guide``).
     """
     curve = model.field_curve
-    theta, real, folded = curve.field_angle_rad, curve.real_mm, curve.folded
     distance = _scene_distance(model.values)
     cap = _field_cap_rad(distance)
-    if curve.ideal_mm.size == 1024 and curve.max_field_angle_rad < cap:
-        sensor_z, _ = image_plane(model.prescription, distance)
-        grid = np.linspace(0.0, cap, FULL_FIELD_SAMPLES)
-        traced = _trace_angles(model, sensor_z, grid)
-        if traced.ideal_mm.size < FULL_FIELD_SAMPLES:
-            end = traced.ideal_mm.size
-            fine = np.concatenate((np.linspace(0.0, grid[end - 1], 64),
-                                   np.linspace(grid[end - 1], grid[end], 66)[1:]))
-            traced = _trace_angles(model, sensor_z, fine)
+    sensor_z, _ = image_plane(model.prescription, distance)
+    theta, real = curve.field_angle_rad, curve.real_mm
+    guide = curve
+    step = float(theta[1] - theta[0])
+    if curve.ideal_mm.size == COARSE_SAMPLES and curve.max_field_angle_rad < cap:
+        # The lens passes more than the sensor needs: trace on to the cap.
+        beyond = np.linspace(theta[-1], cap, BEYOND_SAMPLES + 1)[1:]
+        grid = np.concatenate((theta, beyond))
+        traced = _trace_angles(model, sensor_z, grid, guide)
         theta, real, folded = traced.field_angle_rad, traced.real_mm, traced.folded
+        guide = traced
+        if traced.ideal_mm.size == grid.size:
+            return _field_dict(theta, real, folded, cap)
+        step = float(grid[traced.ideal_mm.size] - theta[-1])
+    # Refine the last interval: where exactly the field ends.
+    fine = np.concatenate((theta[-4:], theta[-1] + step * np.arange(1, 65) / 64.0))
+    refined = _trace_angles(model, sensor_z, fine, guide)
+    if refined.ideal_mm.size > 4:
+        theta = np.concatenate((theta, refined.field_angle_rad[4:]))
+        real = np.concatenate((real, refined.real_mm[4:]))
+    folded = refined.folded or (refined.ideal_mm.size == fine.size and curve.folded)
+    return _field_dict(theta, real, folded, cap)
+
+
+def _field_dict(theta: FloatArray, real: FloatArray, folded: bool, cap: float
+                ) -> dict[str, Any]:
     return {'theta_rad': theta, 'real_mm': real, 'folded': folded,
             'max_field_angle_deg': math.degrees(float(theta[-1])),
             'at_cap': bool(theta[-1] >= cap * (1.0 - 1e-9)),
             'image_circle_radius_mm': float(real[-1])}
 
 
-def _trace_angles(model: LensModel, sensor_z: float, theta: FloatArray) -> RadialMap:
+def _trace_angles(model: LensModel, sensor_z: float, theta: FloatArray,
+                  guide: RadialMap | None = None) -> RadialMap:
     """Trace the chief rays of the field angles ``theta`` (increasing); keep the valid prefix."""
-    real = -trace_field_angles(model.prescription, _scene_distance(model.values), sensor_z,
-                               theta)
+    known = None
+    if guide is not None and guide.aim_offsets is not None:
+        known = (guide.field_angle_rad, guide.aim_offsets)
+    real, offsets = trace_field(model.prescription, _scene_distance(model.values), sensor_z,
+                                theta, known)
+    real = -real
     good = np.isfinite(real)
     rising = np.ones_like(good)
     rising[1:] = np.diff(real) > 0.0
     good &= rising
     end = int(np.argmin(good)) if not good.all() else theta.size
     folded = end < theta.size and bool(np.isfinite(real[end])) and not rising[end]
-    return RadialMap(theta[:end] * model.image_distance_mm, real[:end], theta[:end], folded)
+    return RadialMap(theta[:end] * model.image_distance_mm, real[:end], theta[:end], folded,
+                     offsets[:end])
 
 
 def _covered_field(model: LensModel, field: Mapping[str, Any]) -> dict[str, Any]:
@@ -1072,7 +1486,7 @@ def _sigma_or_nan(fn: Callable[[Mapping[str, float]], float], nominal: Mapping[s
     """
     try:
         sigma = propagate_sigma(fn, dict(nominal), dict(sigmas))
-    except (ValueError, ZeroDivisionError, FloatingPointError):
+    except (ValueError, ZeroDivisionError, FloatingPointError, OverflowError):
         return math.nan
     return float(sigma) if math.isfinite(sigma) else math.nan
 

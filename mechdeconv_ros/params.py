@@ -35,6 +35,9 @@ ParamValue = Union[bool, int, float, str, list]
 ASPHERE_POWERS = (4, 6, 8, 10, 12, 14, 16)
 #: Allowed values of ``output.projection``: the corrected image's projection.
 PROJECTIONS = ('pinhole', 'equidistant')
+#: Allowed values of ``image_transport``: what the node subscribes to.
+IMAGE_TRANSPORTS = ('raw', 'compressed')
+
 #: Allowed values of ``output.interpolation`` and the OpenCV flag names they stand for.
 INTERPOLATIONS = ('nearest', 'linear', 'cubic', 'lanczos4')
 
@@ -103,7 +106,9 @@ SCHEMA: tuple[ParamSpec, ...] = (
        'Radius of the rear surface; a biconvex lens has r2 < 0, 0 = flat.', -1.0e4, 1.0e4),
     _d('lens.thickness_mm', 3.0, 'mm', 'Centre thickness t of the lens.', 0.0, 1.0e3),
     _d('lens.aperture_diameter_mm', 1.0, 'mm',
-       'Diameter d_a of the aperture stop (sets the f-number, eq. 16-18).', 1.0e-3, 1.0e3),
+       'Physical diameter d_a of the aperture stop (at lens.stop_surface in prescription '
+       'mode; sets the f-number, eq. 16-18); at most what the surfaces let through.',
+       1.0e-3, 1.0e3),
     _d('lens.stop_offset_mm', 0.2, 'mm',
        'Offset m_a of the aperture stop from the front principal plane; > 0 towards the '
        'object (eq. 26-34). May put the stop inside the glass. Thick-lens mode only.',
@@ -186,6 +191,20 @@ SCHEMA: tuple[ParamSpec, ...] = (
        'Threads OpenCV may use for the remap (cv2.setNumThreads); 0 = OpenCV default, all '
        'cores, as image_proc. 1 leaves the other cores to the camera driver and the DDS '
        'transport; on 2 cores it sustains about 2/3 of the frame rate.', 0, 64),
+    ParamSpec('image_transport', 'string', 'raw', '',
+              'Input transport, read at start-up as image_proc does: raw subscribes image_raw '
+              '(sensor_msgs/Image); compressed subscribes the resolved image_raw + '
+              '/compressed (sensor_msgs/CompressedImage, JPEG or PNG as image_transport '
+              'writes it) and decodes every frame.', choices=IMAGE_TRANSPORTS, read_only=True),
+    # --- image_rect/compressed output (image_transport's parameter names) ---
+    ParamSpec('image_rect.compressed.format', 'string', 'jpeg', '',
+              'Codec of image_rect/compressed (sensor_msgs/CompressedImage, published only '
+              "while it has a subscriber, as image_transport's compressed plugin writes it): "
+              'jpeg or png.', choices=('jpeg', 'png')),
+    _i('image_rect.compressed.jpeg_quality', 95, '1',
+       'JPEG quality of image_rect/compressed.', 1, 100),
+    _i('image_rect.compressed.png_level', 3, '1',
+       'PNG compression level (zlib) of image_rect/compressed.', 0, 9),
 )
 
 #: Specs by name.

@@ -95,16 +95,18 @@ MAX_AIM_ITERATIONS = 40
 MAX_STEP_HALVINGS = 20
 MAX_START_HALVINGS = 12
 STALL_ITERATIONS = 3
-#: Windows of ray aiming continued from solved neighbours (wide fields, see _aim_continued).
-CONTINUATION_PASSES = 64
 #: Step halvings of the first pass from the paraxial starts: a ray that needs more is aimed
 #: again by continuation from its solved neighbours (cheaper than halving on).
 FIRST_PASS_HALVINGS = 8
-#: Shortest continuation step towards a sample, relative to its field (see _bridge).
-BRIDGE_MIN_STEP = 1e-4
+FIRST_PASS_ITERATIONS = 12
+#: Largest window of samples aimed together by continuation.
+MAX_WINDOW = 32
+#: Shortest continuation step towards a sample, relative to the step from the last solved
+#: sample (three halvings; see _bridge).
+BRIDGE_MIN_FRACTION = 0.125
 #: Newton iterations and step halvings from an extrapolated start (it is close: few needed).
-CONTINUATION_ITERATIONS = 12
-CONTINUATION_HALVINGS = 8
+CONTINUATION_ITERATIONS = 6
+CONTINUATION_HALVINGS = 5
 #: A ray that must travel backwards by more than this to reach a surface fails.
 BACKWARD_TOLERANCE_MM = 1e-9
 
@@ -162,7 +164,7 @@ def _check_shape(i: int, surface: Surface, semi: float) -> None:
     for j, a in enumerate(terms):
         finite_number(f'surface {i}: asphere a{2 * j + 4}', a)
     limit = surfaces.domain_limit_mm(surface)
-    if semi > 0 and semi > limit:
+    if conic != 0.0 and semi > 0 and semi > limit:
         raise ValueError(f'surface {i}: conic {conic:g} leaves the sag undefined beyond '
                          f'r = {limit:.4g} mm, inside the semi-diameter {semi:g} mm')
 
@@ -625,31 +627,47 @@ def _aim(problem: _ChiefRayProblem, field: np.ndarray, start: np.ndarray | None 
     return result
 
 
-def _aim_continued(problem: _ChiefRayProblem, field: np.ndarray) -> np.ndarray:
+def _aim_continued(problem: _ChiefRayProblem, field: np.ndarray,
+                   guide: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """
     Return the aiming offsets of the chief rays, continuing the solution out along the field.
 
     Wide-angle lenses move their real entrance pupil far from the paraxial one, so a paraxial
     start fails at large angles. After :func:`_aim` from the paraxial starts, the first failed
     samples (in order of |field|, one side at a time) are aimed again from the linear
-    extrapolation of the two solved samples below them, a window at a time (doubling while
-    every ray of a window converges), until a sample fails from an extrapolated start too: the
-    branch of chief rays that starts on the axis ends there.
+    extrapolation of the two solved samples below them, a window at a time (doubling up to
+    MAX_WINDOW while every ray of a window converges, back to 4 when one fails), until a sample
+    fails from an extrapolated start too: the branch of chief rays that starts on the axis ends
+    there. ``guide`` (field variable, offset) of solved chief rays replaces the paraxial starts
+    inside its range by interpolation (a dense trace after a coarse one converges in one or two
+    steps).
     """
-    height = _aim(problem, field, None, MAX_AIM_ITERATIONS, FIRST_PASS_HALVINGS)
+    start = None
+    if guide is not None and guide[0].size > 1:
+        known, offsets = guide
+        start = problem.paraxial_height(field)
+        inside = (np.abs(field) <= known[-1]) & np.isfinite(field)
+        # Odd symmetry: the chief ray of -field is the mirror image of that of +field.
+        start[inside] = np.sign(field[inside]) * np.interp(np.abs(field[inside]), known,
+                                                           offsets)
+    height = _aim(problem, field, start, FIRST_PASS_ITERATIONS, FIRST_PASS_HALVINGS)
     for sign in (1.0, -1.0):
         side = np.flatnonzero((field * sign > 0) & np.isfinite(field))
         order = side[np.argsort(np.abs(field[side]), kind='stable')]
         window = 8
-        for _ in range(CONTINUATION_PASSES):
+        # Every pass solves the frontier sample or ends the loop: at most one per sample.
+        for _ in range(order.size):
             solved = np.isfinite(height[order])
             first = int(np.argmin(solved)) if not solved.all() else order.size
             if first == order.size:
                 break
             # Two solved samples below the frontier (the axis ray h = 0 at field 0 counts).
             below = order[:first]
-            f0, h0 = (0.0, 0.0) if below.size < 2 else (field[below[-2]], height[below[-2]])
             f1, h1 = (0.0, 0.0) if below.size < 1 else (field[below[-1]], height[below[-1]])
+            # The solved sample before it at another field (repeated fields are common).
+            distinct = below[:-1][field[below[:-1]] != f1]
+            f0, h0 = ((0.0, 0.0) if distinct.size == 0
+                      else (field[distinct[-1]], height[distinct[-1]]))
             todo = order[first:first + window]
             todo = todo[~np.isfinite(height[todo])]
             if f1 == f0:
@@ -665,7 +683,7 @@ def _aim_continued(problem: _ChiefRayProblem, field: np.ndarray) -> np.ndarray:
                 if not np.isfinite(result[0]):
                     break
             height[todo] = result
-            window = window * 2 if np.isfinite(result).all() else max(4, window // 2)
+            window = min(2 * window, MAX_WINDOW) if np.isfinite(result).all() else 4
     return height
 
 
@@ -676,12 +694,12 @@ def _bridge(problem: _ChiefRayProblem, before: tuple[float, float],
 
     ``before`` and ``last`` are the two solved (field, offset) pairs below ``target``. A step
     that converges is taken and the next one tried at twice its length (up to the target);
-    one that fails is halved, down to BRIDGE_MIN_STEP of the field: there the branch of chief
-    rays ends (NaN).
+    one that fails is halved, down to BRIDGE_MIN_FRACTION of the first step: there the branch
+    of chief rays ends (NaN).
     """
     (f0, h0), (f1, h1) = before, last
     step = target - f1
-    minimum = BRIDGE_MIN_STEP * max(abs(target), 1e-3)
+    minimum = abs(step) * BRIDGE_MIN_FRACTION
     while abs(step) >= minimum:
         trial = min(f1 + step, target) if step > 0 else max(f1 + step, target)
         start = h1 if f1 == f0 else h1 + (h1 - h0) / (f1 - f0) * (trial - f1)
@@ -711,7 +729,8 @@ def _field_variable(problem: _ChiefRayProblem, tan: np.ndarray | None,
 
 def aim_chief_rays(prescription: Prescription, object_distance_mm: float,
                    tan_field: np.ndarray | None = None, *, aim: bool | None = None,
-                   field_angle_rad: np.ndarray | None = None) -> Rays:
+                   field_angle_rad: np.ndarray | None = None,
+                   guide: tuple[np.ndarray, np.ndarray] | None = None) -> Rays:
     """
     Return the object-space chief rays of the given field points.
 
@@ -724,6 +743,8 @@ def aim_chief_rays(prescription: Prescription, object_distance_mm: float,
     :param field_angle_rad: instead of ``tan_field``, the field angle theta itself (rad), which
         may pass 90 deg for a scene at infinity (a finite scene plane ends before 90 deg:
         NaN there).
+    :param guide: ``(theta_rad, offsets)`` of chief rays already aimed (increasing theta >= 0,
+        offsets from :func:`trace_field`): their interpolation starts the aiming.
     :return: flat rays in object space, starting near the first vertex when aimed, at the stop
         centre otherwise; NaN where aiming failed.
     :raises ValueError: for a scene distance <= 0 or an object behind the first vertex, an
@@ -742,7 +763,54 @@ def aim_chief_rays(prescription: Prescription, object_distance_mm: float,
             raise ValueError('the aperture stop is behind the first vertex: the chief ray '
                              'must be aimed')
         return problem.through_stop_centre(field)
-    return problem.object_rays(_aim_continued(problem, field), field)
+    return problem.object_rays(_aim_continued(problem, field, _guide(problem, guide)), field)
+
+
+def _guide(problem: _ChiefRayProblem, guide: tuple[np.ndarray, np.ndarray] | None
+           ) -> tuple[np.ndarray, np.ndarray] | None:
+    """Return a guide of (theta, offset) in the problem's field variable."""
+    if guide is None:
+        return None
+    theta, offsets = (np.asarray(a, dtype=float) for a in guide)
+    keep = np.isfinite(theta) & np.isfinite(offsets)
+    theta, offsets = theta[keep], offsets[keep]
+    if not problem.infinite:
+        keep = theta < 0.5 * math.pi
+        theta, offsets = np.tan(theta[keep]), offsets[keep]
+    return theta, offsets
+
+
+def trace_field(prescription: Prescription, object_distance_mm: float, sensor_z_mm: float,
+                field_angle_rad: np.ndarray,
+                guide: tuple[np.ndarray, np.ndarray] | None = None
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Return the image heights of chief rays by field angle, and their aiming offsets.
+
+    As :func:`trace_field_angles`, also returning the aiming offsets, which a later trace of
+    the same lens and distance takes as its ``guide`` (NaN when the stop is in object space:
+    those chief rays need no aiming).
+
+    :param prescription: the lens.
+    :param object_distance_mm: l from H (``math.inf`` allowed).
+    :param sensor_z_mm: z of the sensor plane.
+    :param field_angle_rad: theta in rad, 1-D.
+    :param guide: ``(theta_rad, offsets)`` of an earlier trace (see :func:`aim_chief_rays`).
+    :return: ``(heights_mm, offsets)``, NaN where the trace fails.
+    :raises ValueError: as :func:`aim_chief_rays`.
+    """
+    theta = np.asarray(field_angle_rad, dtype=float).ravel()
+    problem = _ChiefRayProblem(prescription, object_distance_mm)
+    field = _field_variable(problem, None, theta)
+    if problem.n_before_stop == 0:
+        # A stop in object space: the chief ray is the line through its centre (no aiming).
+        rays = problem.through_stop_centre(field)
+        offsets = np.full(theta.shape, np.nan)
+    else:
+        offsets = _aim_continued(problem, field, _guide(problem, guide))
+        rays = problem.object_rays(offsets, field)
+    image = transfer_to_plane(trace_surfaces(prescription, rays), float(sensor_z_mm))
+    return image.y, offsets
 
 
 def trace_chief_rays(prescription: Prescription, object_distance_mm: float, sensor_z_mm: float,

@@ -97,8 +97,17 @@ def test_plot_writes_a_png(tmp_path, capsys):
     (['info', '--params', CASE2, '--width', '0'], '--width'),
     (['info'], 'image size is unknown'),
     (['correct', '--params', CASE2, '/nonexistent.png', 'x.png'], 'no such file'),
+    (['info', '--params', CASE2, '-p', 'scene.focus_distance_mm=3.0'],
+     'scene.focus_distance_mm: 3 mm is inside the focal length 4.437 mm'),
+    (['info', '--params', CASE2, '-p', 'lens.stop_offset_mm=-10'],
+     'lens.stop_offset_mm: -10 mm puts the stop'),
+    (['camera-info', '--params', CASE2, '-p', 'lens.aperture_diameter_mm=1000'],
+     'lens.aperture_diameter_mm: 1000 mm'),
+    (['plot', '--params', CASE2, '-p', 'scene.circle_of_confusion_mm=5', 'x.png'],
+     'scene.circle_of_confusion_mm: 5 mm is larger than'),
 ], ids=['scene-inside-f', 'afocal', 'negative-pixel', 'missing-file', 'zero-width',
-        'no-size', 'missing-image'])
+        'no-size', 'missing-image', 'focus-inside-f', 'stop-behind-sensor', 'aperture-1000',
+        'circle-of-confusion'])
 def test_bad_input_is_one_line_and_status_2(argv, words):
     proc = subprocess.run([sys.executable, '-m', 'mechdeconv_ros.cli', *argv],
                           capture_output=True, text=True, cwd=ROOT, timeout=60)
@@ -116,3 +125,29 @@ def test_unreadable_image(tmp_path):
                           capture_output=True, text=True, cwd=ROOT, timeout=60)
     assert proc.returncode == 2
     assert 'not a readable image' in proc.stderr
+
+
+def test_params_file_that_describes_no_camera(tmp_path):
+    """A params file with a focus distance inside f is refused like the same -p value."""
+    text = Path(CASE2).read_text().replace('focus_distance_mm: 0.0', 'focus_distance_mm: 3.0')
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text(text)
+    proc = subprocess.run([sys.executable, '-m', 'mechdeconv_ros.cli', 'info', '--params',
+                           str(bad)], capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert proc.returncode == 2
+    assert proc.stderr.strip().startswith('mechdeconv: error: scene.focus_distance_mm: 3 mm')
+
+
+def test_unusual_values_warn_once_on_stderr(tmp_path):
+    """A far stop is accepted; the warning is printed once even for a folder of images."""
+    folder = tmp_path / 'in'
+    folder.mkdir()
+    for name in ('a.png', 'b.png', 'c.png'):
+        cv2.imwrite(str(folder / name), np.full((48, 64), 100, np.uint8))
+    proc = subprocess.run([sys.executable, '-m', 'mechdeconv_ros.cli', 'correct', '--params',
+                           CASE2, '-p', 'lens.stop_offset_mm=7', str(folder),
+                           str(tmp_path / 'out')],
+                          capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    lines = [line for line in proc.stderr.splitlines() if 'warning' in line]
+    assert len(lines) == 1 and 'lens.stop_offset_mm: the stop is' in lines[0]

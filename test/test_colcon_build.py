@@ -86,6 +86,7 @@ def test_build_installs_the_executable_and_the_config(install: Path) -> None:
     assert (share / 'package.xml').is_file()
     for name in ('case2.yaml', 'fastdds_shm.xml'):
         assert (share / 'config' / name).is_file(), name
+    assert (share / 'launch' / 'correct.launch.py').is_file()
     assert (install / PACKAGE / 'share' / 'ament_index' / 'resource_index' / 'packages'
             / PACKAGE).is_file()
     assert (site_packages(install) / PACKAGE / 'correct_node.py').is_file()

@@ -14,6 +14,6 @@ ROOT = Path(__file__).resolve().parents[1]
 @pytest.mark.linter
 def test_flake8():
     paths = [str(ROOT / name) for name in ('mechdeconv_ros', 'test', 'tools', 'benchmarks',
-                                           'setup.py') if (ROOT / name).exists()]
+                                           'launch', 'setup.py') if (ROOT / name).exists()]
     rc, errors = main_with_errors(argv=paths)
     assert rc == 0, 'Found %d code style errors / warnings:\n' % len(errors) + '\n'.join(errors)

@@ -26,6 +26,8 @@ OFFSET = 'lens.stop_offset_mm'
 BAD_OFFSET = 50.0
 #: Offsets from here on build a model whose maps fail (e.g. out of memory).
 FAILING_MAPS_OFFSET = 40.0
+#: Offsets from here on build with a warning (a stop far from the lens).
+FAR_OFFSET = 10.0
 WAIT_S = 5.0
 
 
@@ -43,9 +45,14 @@ class FakeModel:
         """Return the stop offset the model was built with."""
         return float(self.values[OFFSET])
 
+    @property
+    def warnings(self) -> tuple[str, ...]:
+        """Return the build-time warnings: a stop at FAR_OFFSET or more is 'far'."""
+        return (f'{OFFSET}: far',) if self.offset >= FAR_OFFSET else ()
+
     def report(self) -> dict[str, Any]:
         """Return a summary, as LensModel.report does."""
-        return {'offset': self.offset, 'warnings': []}
+        return {'offset': self.offset, 'warnings': list(self.warnings)}
 
 
 class Gate:
@@ -337,6 +344,64 @@ def test_summary_is_computed_by_the_thread_once_per_revision(
     set_params(live, lens__stop_offset_mm=0.3)
     assert live.wait_idle(WAIT_S)
     assert live.status().report['offset'] == 0.3
+
+
+def warnings_logged(live: LiveModel) -> list[str]:
+    """Return the warning lines logged so far."""
+    return [text for level, text in live.logs if level == 'warning']  # type: ignore[attr-defined]
+
+
+def test_warnings_are_logged_once_when_they_appear(live: LiveModel, gate: Gate) -> None:
+    gate.hold = False
+    first_frame(live, gate)
+    assert warnings_logged(live) == []
+    set_params(live, lens__stop_offset_mm=20.0)
+    assert live.wait_idle(WAIT_S)
+    assert warnings_logged(live) == [f'{OFFSET}: far']
+    # The same warning on the next models (another size, an unrelated change): not again.
+    live.model_for_frame(80, 60)
+    set_params(live, output__alpha=0.5)
+    assert live.wait_idle(WAIT_S)
+    assert live.status().active.revision >= 4
+    assert warnings_logged(live) == [f'{OFFSET}: far']
+    # Gone, then back: logged again.
+    set_params(live, lens__stop_offset_mm=0.3)
+    assert live.wait_idle(WAIT_S)
+    set_params(live, lens__stop_offset_mm=21.0)
+    assert live.wait_idle(WAIT_S)
+    assert warnings_logged(live) == [f'{OFFSET}: far'] * 2
+
+
+def test_start_up_warnings_are_logged_once(gate: Gate) -> None:
+    gate.hold = False
+    live = make_live(gate, lens__stop_offset_mm=20.0)
+    try:
+        assert warnings_logged(live) == [f'{OFFSET}: far']
+        first_frame(live, gate)
+        assert live.status().report['warnings'] == [f'{OFFSET}: far']
+        assert warnings_logged(live) == [f'{OFFSET}: far']
+    finally:
+        live.stop()
+
+
+def test_a_failing_logger_does_not_stop_the_rebuild_thread(gate: Gate) -> None:
+    """E.g. rclpy's "Logger severity cannot be changed between calls" from a shared line."""
+    def log(level: str, message: str) -> None:
+        if level == 'warning':
+            raise ValueError('Logger severity cannot be changed between calls.')
+
+    gate.hold = False
+    live = LiveModel(values_with(), build_model=gate.build_model, build_maps=gate, log=log)
+    live.start()
+    try:
+        first_frame(live, gate)
+        set_params(live, lens__stop_offset_mm=20.0)        # a warning: the logger raises
+        assert live.wait_idle(WAIT_S)
+        set_params(live, lens__stop_offset_mm=0.3)
+        assert live.wait_idle(WAIT_S)
+        assert live.status().active.model.offset == 0.3
+    finally:
+        live.stop()
 
 
 def test_stop_ends_the_thread_even_during_a_build(gate: Gate) -> None:

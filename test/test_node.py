@@ -681,7 +681,11 @@ def test_params_file_arrays_load_and_sigterm_exits_cleanly(tmp_path: Path) -> No
 @pytest.mark.parametrize(('override', 'expected'), [
     ('lens.r1_mm:=4', 'decimal point'),
     ('scene.distance_mm:=2.0', 'inside the focal length'),
-], ids=['integer-for-double', 'scene-inside-f'])
+    ('scene.focus_distance_mm:=3.0', 'scene.focus_distance_mm: 3 mm is inside the focal length'),
+    ('lens.stop_offset_mm:=-10.0', 'lens.stop_offset_mm: -10 mm puts the stop'),
+    ('lens.aperture_diameter_mm:=1000.0', 'lens.aperture_diameter_mm: 1000 mm'),
+], ids=['integer-for-double', 'scene-inside-f', 'focus-inside-f', 'stop-behind-sensor',
+        'aperture-1000'])
 def test_invalid_start_up_parameters_exit_with_a_reason(tmp_path: Path, override: str,
                                                         expected: str) -> None:
     argv = node_command(case2_params(tmp_path), override)
@@ -689,6 +693,20 @@ def test_invalid_start_up_parameters_exit_with_a_reason(tmp_path: Path, override
                          timeout=30, start_new_session=True)
     assert run.returncode == 1, run.stdout + run.stderr
     assert expected in run.stderr, run.stderr
+    assert 'Traceback' not in run.stderr
+
+
+def test_params_file_of_a_lens_that_cannot_exist_exits_with_the_reason(tmp_path: Path) -> None:
+    """The params file itself (not a -p override) describes no camera: exit 1, the reason."""
+    values = load_params_file(case2_params(tmp_path))
+    values['scene.circle_of_confusion_mm'] = 5.0
+    params = tmp_path / 'bad.yaml'
+    params.write_text(to_params_yaml(values, node_name='correct_node'))
+    run = subprocess.run(node_command(params), env=ros_env(next_domain_id()),
+                         capture_output=True, text=True, timeout=30, start_new_session=True)
+    assert run.returncode == 1, run.stdout + run.stderr
+    assert 'scene.circle_of_confusion_mm: 5 mm is larger than the 3.361 mm diagonal' in \
+        run.stderr, run.stderr
     assert 'Traceback' not in run.stderr
 
 

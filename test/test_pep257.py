@@ -13,7 +13,8 @@ ROOT = Path(__file__).resolve().parents[1]
 @pytest.mark.linter
 @pytest.mark.pep257
 def test_pep257():
-    paths = [str(ROOT / name) for name in ('mechdeconv_ros', 'test', 'tools', 'benchmarks')
+    paths = [str(ROOT / name) for name in ('mechdeconv_ros', 'test', 'tools', 'benchmarks',
+                                           'launch')
              if (ROOT / name).exists()]
     rc = main(argv=paths)
     assert rc == 0, 'Found code style errors / warnings'

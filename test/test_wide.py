@@ -113,7 +113,7 @@ def test_a_fold_ends_the_field_with_a_warning() -> None:
     assert any('folds back' in w for w in report['warnings'])
     assert 15.0 < report['max_field_angle_deg'] < 25.0
     assert np.all(np.diff(report['distortion_curve']['real_height_mm']) > 0)
-    assert model.curve.valid_real_mm <= report['covered_field']['image_circle_radius_mm'] + 1e-6
+    assert model.curve.valid_real_mm <= report['covered_field']['image_circle_radius_mm'] + 1e-4
 
 
 def test_equidistant_maps_reproduce_the_trace(fisheye: LensModel) -> None:
