@@ -60,7 +60,8 @@ design field, each traced alone, kept up to the largest angle optiland traces (r
 0.02 deg; a ray that would run backwards from one surface to the next, where two surfaces
 cross, does not count) or to just before the real height folds back; why the reach ends is
 recorded. Clear semi-diameters are the largest heights of real chief and meridional marginal
-rays over the design field, rounded up to 1 um.
+rays over the design field, rounded up to 1 um, limited to where the surfaces of one glass
+element (e.g. a cemented doublet) still have a non-negative edge thickness.
 
 Signs: the object point lies at +y (finite: height Y > 0; infinity: the chief ray arrives
 travelling towards -y, i.e. optiland's angle field -Hy), ``tan_field`` = its tangent seen from
@@ -836,6 +837,56 @@ def _curve_angles(end_deg: float) -> np.ndarray:
     return angles
 
 
+def _sag_mm(row: dict[str, Any], r: float) -> float:
+    """Return the sag of a lens row (conic + even asphere) at height r, mm."""
+    c = 0.0 if row['radius_mm'] == 0.0 else 1.0 / row['radius_mm']
+    z = c * r * r / (1.0 + math.sqrt(max(0.0, 1.0 - (1.0 + row['conic']) * c * c * r * r)))
+    return z + sum(a * r ** k for a, k in zip(row['asphere'], ASPHERE_ORDERS))
+
+
+def edge_limited(rows: list[dict[str, Any]], semi: list[float]) -> tuple[list[float], dict]:
+    """
+    Limit the semi-diameters of each glass element to where its surfaces do not cross.
+
+    An element (surfaces joined by glass, as cemented doublets) is as wide as its widest
+    clear semi-diameter a; every pair of its consecutive surfaces needs a non-negative edge
+    thickness t - sag_i(a) + sag_j(a) there. Where it would be negative, every surface of the
+    element is limited to the largest such a (rounded down to 1 um): the rays of the field's
+    edge that would pass outside it are vignetted, as in the built lens.
+
+    :return: (semi-diameters, {element: limit} for the elements that were limited)
+    """
+    z = np.concatenate(([0.0], np.cumsum([row['thickness_mm'] for row in rows[:-1]])))
+    elements, current, before = [], [], 1.0
+    for i, row in enumerate(rows):
+        if row['refractive_index'] == before:
+            continue                              # a dummy plane (the stop): no glass edge
+        current.append(i)
+        before = row['refractive_index']
+        if before == 1.0:
+            if len(current) > 1:
+                elements.append(current)
+            current = []
+
+    def crosses(element: list[int], a: float) -> bool:
+        return any(z[j] + _sag_mm(rows[j], a) - z[i] - _sag_mm(rows[i], a) < 0.0
+                   for i, j in zip(element[:-1], element[1:]))
+    out, limited = list(semi), {}
+    for element in elements:
+        widest = max(semi[i] for i in element)
+        if not crosses(element, widest):
+            continue
+        lo, hi = 0.0, widest
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (lo, mid) if crosses(element, mid) else (mid, hi)
+        limit = math.floor(lo * 1000.0) / 1000.0
+        for i in element:
+            out[i] = min(out[i], limit)
+        limited[f'surfaces {element[0]}-{element[-1]}'] = limit
+    return out, limited
+
+
 def wide_curve(lens, scan: dict, wavelength_um: float, pixel_um: float) -> tuple:
     """
     Return the whole-field curve of a scan (robust aiming), cross-checked by iterative aiming.
@@ -935,7 +986,8 @@ def wide_entry(spec: tuple) -> dict[str, Any]:
         + ('' if fold is None else f', the real height folds near {fold:.2f} deg')
         + f' in {time.monotonic() - t0:.1f} s')
     curve, aiming = wide_curve(lens, scan, wavelength_um, sens['tolerance_pixel_um'])
-    semi = clear_semi_diameters(lens, design_deg, wavelength_um)
+    semi, edge_limits = edge_limited(rows, clear_semi_diameters(lens, design_deg,
+                                                                wavelength_um))
     heights = curve['max_chief_height_at_optiland_surface_mm']
     presc = our_surfaces(rows, semi)
     z = [float(s.geometry.cs.z) for s in lens.surfaces]
@@ -965,6 +1017,7 @@ def wide_entry(spec: tuple) -> dict[str, Any]:
         'image_circle_note': '|real height| at the design field; the clear semi-diameters '
                              'pass every chief and meridional marginal ray up to it',
         'sensor_corner_beyond_image_circle': sens['corner_radius_mm'] > circle,
+        'semi_diameters_limited_by_edge_thickness_mm': edge_limits,
         'prescription': presc,
         'params': prescription_params(presc),
         'chief_ray_within_semi_diameter_over_curve': [
@@ -1010,7 +1063,8 @@ def wide_document(cmd: str) -> dict[str, Any]:
             'aiming': "optiland 'robust' ray aiming (tolerance tol_mm at the stop); optiland's "
                       "'iterative' aimer is a cross-check where it converges",
             'semi_diameter_mm': 'clear semi-diameters measured with real chief and marginal '
-                                'rays over the design field (rounded up to 1 um)',
+                                'rays over the design field (rounded up to 1 um), limited '
+                                'where the surfaces of one glass element would cross',
         },
         'lenses': lenses,
     }
