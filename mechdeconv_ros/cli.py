@@ -115,7 +115,7 @@ def format_report(report: dict[str, Any]) -> str:
         f"image: {report['width_px']}x{report['height_px']} px -> "
         f"{report['out_width_px']}x{report['out_height_px']} px",
         f"FOV: {fov['horizontal']:.2f} x {fov['vertical']:.2f} deg "
-        f"(diagonal {fov['diagonal']:.2f} deg)",
+        f"(diagonal {fov['diagonal']:.2f} deg) paraxial; {_traced_fov(report)}",
         f"scene at {mm(report['scene_distance_mm'])}: footprint "
         f"{mm(report['footprint_mm']['x'])} x {mm(report['footprint_mm']['y'])}, "
         f"feature resolution {mm(report['feature_resolution_mm']['x'])} x "
@@ -137,6 +137,14 @@ def format_report(report: dict[str, Any]) -> str:
 
 def _px(value: float | None) -> str:
     return 'n/a' if value is None else f'{value:.2g} px'
+
+
+def _traced_fov(report: dict[str, Any]) -> str:
+    """Return the raw image's field of view as the trace sees it (None past the circle)."""
+    field = report['covered_field']
+    parts = [field['horizontal_deg'], field['vertical_deg'], field['diagonal_deg']]
+    text = ['beyond the image circle' if p is None else f'{p:.2f}' for p in parts]
+    return f'traced {text[0]} x {text[1]} deg (diagonal {text[2]} deg)'
 
 
 def _field_line(report: dict[str, Any]) -> str:

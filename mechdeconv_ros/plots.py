@@ -103,13 +103,15 @@ def make_figure(model: LensModel) -> Any:
     ideal, real = model.curve.ideal_mm, model.curve.real_mm
     ax = axes[0, 0]
     ax.plot(ideal, (real - ideal) / pitch, color='tab:blue')
-    ax.set_xlabel('ideal (pinhole) image height [mm]')
+    ideal_name = ('ideal (pinhole, v tan theta)' if model.projection == 'pinhole'
+                  else 'ideal (equidistant, v theta)')
+    ax.set_xlabel(f'{ideal_name} image height [mm]')
     ax.set_ylabel('real - ideal [px]', color='tab:blue')
     corner = np.hypot(model.width / 2 * model.pixel_mm[0], model.height / 2 * model.pixel_mm[1])
     ax.axvline(float(model.curve.ideal_from_real(np.array(min(corner, real[-1])))),
                color='grey', ls='--', lw=0.8, label='raw image corner')
-    ax.set_title(f'traced radial distortion ({model.distortion_model} fit RMS '
-                 f'{model.fit_rms_px:.2g} px)')
+    ax.set_title(f'traced radial distortion ({model.distortion_model}: max error '
+                 f'{model.equivalent_max_error_px:.2g} px)')
     ax.legend(loc='lower left')
     ax2 = ax.twinx()
     with np.errstate(invalid='ignore', divide='ignore'):
@@ -119,7 +121,7 @@ def make_figure(model: LensModel) -> Any:
     ax = axes[0, 1]
     nx, ny = 24, 18
     u, v = np.meshgrid(np.linspace(0, model.width - 1, nx), np.linspace(0, model.height - 1, ny))
-    # Where each raw pixel belongs on the pinhole sensor, in raw pixels: the real radius
+    # Where each raw pixel belongs on the ideal sensor, in raw pixels: the real radius
     # scaled by ideal / real along the same direction.
     x_mm = (u - model.K[0, 2]) * model.pixel_mm[0]
     y_mm = (v - model.K[1, 2]) * model.pixel_mm[1]

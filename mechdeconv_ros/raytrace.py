@@ -699,10 +699,14 @@ def _bridge(problem: _ChiefRayProblem, before: tuple[float, float],
     """
     (f0, h0), (f1, h1) = before, last
     step = target - f1
-    minimum = abs(step) * BRIDGE_MIN_FRACTION
+    # From the axis (nothing solved yet) the walk may need many short steps.
+    minimum = abs(step) * (BRIDGE_MIN_FRACTION if f1 != 0.0 else BRIDGE_MIN_FRACTION ** 3)
     while abs(step) >= minimum:
         trial = min(f1 + step, target) if step > 0 else max(f1 + step, target)
-        start = h1 if f1 == f0 else h1 + (h1 - h0) / (f1 - f0) * (trial - f1)
+        if f1 == f0:
+            start = float(problem.paraxial_height(np.array([trial]))[0])
+        else:
+            start = h1 + (h1 - h0) / (f1 - f0) * (trial - f1)
         solved = _aim(problem, np.array([trial]), np.array([start]), CONTINUATION_ITERATIONS,
                       CONTINUATION_HALVINGS)[0]
         if np.isfinite(solved):

@@ -75,6 +75,17 @@ def test_speed_quick(tmp_path):
     assert any(key in line for line in report.speed_tables(doc))
 
 
+def test_wide_quick(tmp_path):
+    from benchmarks import wide
+    doc = wide.run(tmp_path, quick=True)
+    results = doc['results']
+    for name in ('rebuild double Gauss, aspheric', 'rebuild double Gauss, spherical',
+                 'model fisheye 170 deg, equidistant', 'frame rgb8 fisheye 170 deg, equidistant'):
+        assert results[name]['median_ms'] > 0.0, name
+    assert (tmp_path / 'wide.json').exists()
+    assert any('aspheric' in line for line in wide.tables(doc))
+
+
 @pytest.mark.ros
 def test_node_latency_quick(tmp_path):
     doc = node_latency.run(tmp_path, quick=True)

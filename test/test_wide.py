@@ -69,6 +69,20 @@ def test_field_angles_pass_90_deg_at_infinity() -> None:
     assert np.all(np.diff(real) > 0)
 
 
+def test_a_wide_field_traced_alone_lands_as_in_a_batch() -> None:
+    lens = build_model(wide_values(3.0)).prescription
+    z, _ = rt.image_plane(lens, math.inf)
+    batch = np.radians(np.linspace(0.0, 99.0, 100))
+    heights = rt.trace_field_angles(lens, math.inf, z, batch)
+    for i in (50, 80, 95, 99):
+        alone = rt.trace_field_angles(lens, math.inf, z, batch[[i]])
+        assert_allclose(alone, heights[[i]], atol=1e-9)
+    # Repeated and unordered angles (the pixels of an image) trace as well.
+    shuffled = np.random.default_rng(2).permutation(np.repeat(batch, 3))
+    assert_allclose(rt.trace_field_angles(lens, math.inf, z, shuffled),
+                    np.interp(shuffled, batch, heights), atol=1e-9)
+
+
 @pytest.mark.parametrize('distance', [math.inf, 1000.0])
 def test_field_angles_agree_with_the_tangent_trace(distance: float) -> None:
     lens = make_prescription(defaults())
