@@ -1,0 +1,368 @@
+# Copyright 2026 The mechdeconv_ros Authors.
+# SPDX-License-Identifier: Apache-2.0
+"""
+Relative illumination: the sensor irradiance of a uniform Lambertian scene, traced.
+
+Pure numpy, no ROS. Geometric optics, no coating or absorption losses.
+
+Model
+-----
+Radiance is conserved along a ray (L / n^2, and the sensor is in air), so a sensor point
+receives E = L * Omega_p with the projected solid angle
+
+    Omega_p(h) = integral over the passing image-side directions of cos(theta') dOmega'
+               = area of the passing set in the (k_x, k_y) direction-cosine plane,
+
+because dk_x dk_y = cos(theta') dOmega'. A direction passes when its ray, traced BACKWARDS
+from the sensor point (0, h) on the sensor plane through the lens, clears every aperture (the
+stop, each semi-diameter, the lens edges) without total internal reflection: every such ray
+ends on the uniform scene. This is the irradiance on the flat sensor, not the flux of the cone
+that leaves an object point: with field curvature the corner bundle does not converge on the
+sensor. The relative illumination is
+
+    RI(h) = Omega_p(h) / Omega_p(0),        h the REAL radial distance on the sensor (mm).
+
+``pupil_pass_fraction(h) = Omega_p(h) / Omega_stop(h)``, where Omega_stop counts the
+directions that pass the stop alone (semi-diameters ignored, lens edges and TIR kept): the
+share of the beam through the stop that the other apertures let through, the mechanical
+vignetting, which a smaller stop reduces. RI = pupil_pass_fraction x (the natural fall-off,
+cos^4-like, of the stop-limited beam).
+
+Integration
+-----------
+The passing set is symmetric in k_x. For each height a scan of k_y along k_x = 0 and a
+bisection of its two ends give [k_lo, k_hi] (for a convex set the extreme k_y lie on
+k_x = 0); with c = (k_lo + k_hi)/2, r = (k_hi - k_lo)/2 the rows k_y = c - r cos(t) at the
+midpoints of N equal steps of t in [0, pi] carry the half-width b(t) of the set (bisection in
+k_x from 0), and
+
+    Omega_p = integral 2 b dk_y = integral_0^pi 2 b(t) r sin(t) dt ~ (pi / N) sum 2 b r sin t,
+
+exact for an ellipse (b = r' sin t) and free of the square-root end behaviour of b(k_y).
+
+Closed forms (tests): an unclipped Lambertian disk of radius a at distance d, seen from a
+point at lateral offset h on a parallel plane, gives (Moon 1936; Sparrow & Cess, Radiation
+Heat Transfer, disk-to-parallel-element view factor)
+
+    Omega_p = (pi / 2) (1 - (d^2 + h^2 - a^2) / sqrt((d^2 + h^2 + a^2)^2 - 4 a^2 h^2)),
+
+pi a^2 / (a^2 + d^2) = pi sin^2(theta_max) on the axis, and for a << d the cos^4 law
+Omega_p ~ pi a^2 d^2 / (d^2 + h^2)^2 = pi (a / d)^2 cos^4(theta).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+from typing import Any, Mapping
+
+from mechdeconv_ros.raytrace import image_plane, paraxial, Prescription
+from mechdeconv_ros.trace3d import (
+    direction_from_cosines, lens_system, reversed_system, System, trace_pass)
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+
+#: Heights of the traced RI curve, uniform from the axis to just past the raw image corner.
+RI_SAMPLES = 32
+#: Samples of the meridional (k_x = 0) scan of each height over k_y in (-1, 1).
+SCAN_SAMPLES = 384
+#: Rows of the k_y integration and bisection steps of each edge.
+ROWS = 24
+BISECTION_STEPS = 16
+#: Multiples of the meridional half-width probed to bracket each row's half-width.
+PROBE_FACTORS = (0.8, 1.25, 1.6, 2.5, 4.0, 8.0)
+
+
+@dataclass(frozen=True)
+class Illumination:
+    """
+    The traced relative illumination over the real sensor radius.
+
+    ``height_mm`` is uniform from 0; ``ri`` is 1 on the axis; ``pupil_pass_fraction`` is
+    None when it was not asked for. ``corner_height_mm`` is the real radius of the raw image's
+    corner pixel centre, ``corner_ri`` the RI there.
+    """
+
+    height_mm: FloatArray
+    ri: FloatArray
+    pupil_pass_fraction: FloatArray | None
+    corner_height_mm: float
+    corner_ri: float
+
+    def at(self, height_mm: FloatArray) -> FloatArray:
+        """
+        Interpolate RI at real sensor radii (linear; the last value beyond the curve).
+
+        :param height_mm: real radii, mm, any shape.
+        :return: RI, same shape.
+        """
+        return np.interp(np.asarray(height_mm, dtype=np.float64), self.height_mm, self.ri)
+
+    def report(self) -> dict[str, Any]:
+        """Return the JSON-ready ``relative_illumination`` entry of ``mechdeconv info``."""
+        out: dict[str, Any] = {
+            'image_height_mm': [round(float(h), 9) for h in self.height_mm],
+            'ri': [round(float(v), 6) for v in self.ri],
+            'corner_ri': round(float(self.corner_ri), 6),
+            'corner_height_mm': round(float(self.corner_height_mm), 9),
+        }
+        if self.pupil_pass_fraction is not None:
+            out['pupil_pass_fraction'] = [round(float(v), 6) for v in self.pupil_pass_fraction]
+            out['corner_pupil_pass_fraction'] = round(float(np.interp(
+                self.corner_height_mm, self.height_mm, self.pupil_pass_fraction)), 6)
+        return out
+
+
+def stop_of(values: Mapping[str, Any]) -> tuple[float, int | None]:
+    """
+    Return the aperture stop of a parameter set: (clear radius in mm, stop surface or None).
+
+    The stop's clear diameter is ``lens.aperture_diameter_mm``; in prescription mode it sits
+    on surface ``lens.stop_surface`` (whose semi-diameter clips in addition), in thick-lens
+    mode it is a plane at the prescription's ``stop_z_mm``.
+
+    :param values: checked parameter values.
+    :return: the stop radius and the surface carrying it.
+    """
+    radius = 0.5 * float(values['lens.aperture_diameter_mm'])
+    if len(values['lens.surfaces.radius_mm']) > 0:
+        return radius, int(values['lens.stop_surface'])
+    return radius, None
+
+
+def backward_system(prescription: Prescription, stop_radius_mm: float,
+                    stop_surface: int | None, sensor_z_mm: float) -> System:
+    """
+    Return the lens mirrored about the sensor plane: backward rays start at z' = 0.
+
+    :param prescription: the lens.
+    :param stop_radius_mm: clear radius of the stop.
+    :param stop_surface: surface carrying the stop, None for a stop plane.
+    :param sensor_z_mm: the sensor plane.
+    :return: the mirrored system (:func:`mechdeconv_ros.trace3d.reversed_system`).
+    """
+    system = lens_system(prescription, stop_radius_mm, stop_surface)
+    return reversed_system(system, sensor_z_mm)
+
+
+def _passes(system: System, height: FloatArray, kx: FloatArray, ky: FloatArray) -> np.ndarray:
+    """Return which backward rays from (0, height, 0) with cosines (kx, ky) pass."""
+    kz = direction_from_cosines(kx, ky)
+    ok, _ = trace_pass(system, 0.0, height, 0.0, kx, ky, kz)
+    return ok
+
+
+def _bisect(system: System, height: FloatArray, fixed: FloatArray, good: FloatArray,
+            bad: FloatArray, along_x: bool, steps: int) -> FloatArray:
+    """Bisect between passing and failing cosines (along k_x or k_y) to the edge."""
+    good = good.copy()
+    bad = bad.copy()
+    for _ in range(steps):
+        mid = 0.5 * (good + bad)
+        ok = (_passes(system, height, mid, fixed) if along_x
+              else _passes(system, height, fixed, mid))
+        good = np.where(ok, mid, good)
+        bad = np.where(ok, bad, mid)
+    return 0.5 * (good + bad)
+
+
+def beam_area(system: System, heights_mm: FloatArray, *, scan: int = SCAN_SAMPLES,
+              rows: int = ROWS, steps: int = BISECTION_STEPS) -> FloatArray:
+    """
+    Return the projected solid angle of the passing directions at each sensor height.
+
+    :param system: the backward system (:func:`backward_system`), sensor at z' = 0.
+    :param heights_mm: sensor points (0, h), any shape.
+    :param scan: samples of the meridional scan.
+    :param rows: rows of the k_y integration.
+    :param steps: bisection steps per edge.
+    :return: Omega_p in steradians (projected), same shape; 0 where no ray passes.
+    """
+    heights = np.asarray(heights_mm, dtype=np.float64)
+    h = heights.ravel()
+    area = np.zeros(h.size)
+    ky = -1.0 + (np.arange(scan) + 0.5) * (2.0 / scan)
+    through = _passes(system, h[:, None], np.zeros(1), ky[None, :])
+    missed = np.flatnonzero(~through.any(axis=1))
+    if missed.size and scan < 16 * SCAN_SAMPLES:
+        # A beam narrower than the scan step (a tiny stop, or the last sliver of a vignetted
+        # field): look again, 16 times finer, at those heights only.
+        area[missed] = beam_area(system, h[missed], scan=16 * scan, rows=rows, steps=steps)
+    live = np.flatnonzero(through.any(axis=1))
+    if live.size == 0:
+        return area.reshape(heights.shape)
+    through = through[live]
+    hl = h[live]
+    lo = np.argmax(through, axis=1)
+    hi = scan - 1 - np.argmax(through[:, ::-1], axis=1)
+    good = np.concatenate((ky[lo], ky[hi]))
+    bad = np.concatenate((np.where(lo > 0, ky[lo - 1], -1.0),
+                          np.where(hi < scan - 1, ky[np.minimum(hi + 1, scan - 1)], 1.0)))
+    edges = _bisect(system, np.concatenate((hl, hl)), np.zeros(2 * hl.size), good, bad,
+                    False, steps)
+    k_lo, k_hi = edges[:hl.size], edges[hl.size:]
+    centre = 0.5 * (k_lo + k_hi)[:, None]
+    radius = 0.5 * (k_hi - k_lo)[:, None]
+    t = (np.arange(rows) + 0.5) * (math.pi / rows)
+    row_ky = centre - radius * np.cos(t)[None, :]
+    row_h = np.broadcast_to(hl[:, None], row_ky.shape)
+    kmax = np.sqrt(np.maximum(0.0, 1.0 - row_ky * row_ky)) * (1.0 - 1e-12)
+    # A first bracket from the meridional half-width (exact for a circle; an off-axis beam is
+    # wider sagittally), then bisection.
+    guess = radius * np.sin(t)[None, :]
+    factors = np.array(PROBE_FACTORS)[:, None, None]
+    probe = np.minimum(factors * guess[None], kmax[None])
+    ok = _passes(system, row_h[None], probe, row_ky[None])
+    centre_ok = _passes(system, row_h, np.zeros(1), row_ky)
+    # Largest passing probe (or 0) and the next one (or k_max): a bracket of the edge.
+    count = np.sum(np.cumprod(ok, axis=0), axis=0)
+    padded = np.concatenate((np.zeros((1,) + kmax.shape), probe, kmax[None]))
+    good = np.take_along_axis(padded, count[None], axis=0)[0]
+    bad = np.take_along_axis(padded, count[None] + 1, axis=0)[0]
+    half = _bisect(system, row_h.ravel(), row_ky.ravel(), good.ravel(), bad.ravel(), True,
+                   max(4, steps - 4)).reshape(row_ky.shape)
+    half = np.where(centre_ok, half, 0.0)
+    area[live] = (math.pi / rows) * np.sum(2.0 * half * radius * np.sin(t)[None, :], axis=1)
+    return area.reshape(heights.shape)
+
+
+def relative_illumination(model: Any, *, samples: int = RI_SAMPLES,
+                          with_fraction: bool = True) -> Illumination:
+    """
+    Trace the relative illumination of a :class:`~mechdeconv_ros.model.LensModel`.
+
+    :param model: the lens model (its values, prescription, sensor and pixel pitch).
+    :param samples: heights from the axis to 1.02 x the raw image's half-diagonal.
+    :param with_fraction: also trace the stop-only beam for ``pupil_pass_fraction``.
+    :return: the curve.
+    :raises ValueError: when not even the axial beam passes the lens.
+    """
+    values = model.values
+    radius, surface = stop_of(values)
+    distance = float(values['scene.distance_mm'])
+    distance = math.inf if distance == 0.0 else distance
+    sensor_z, _ = image_plane(model.prescription, distance)
+    system = backward_system(model.prescription, radius, surface, sensor_z)
+    px, py = model.pixel_mm
+    corner = math.hypot((model.width - 1) / 2.0 * px, (model.height - 1) / 2.0 * py)
+    edge = math.hypot(model.width / 2.0 * px, model.height / 2.0 * py)
+    heights = np.linspace(0.0, 1.02 * edge, samples)
+    area = beam_area(system, heights)
+    if not area[0] > 0:
+        raise ValueError('no ray from the scene reaches the centre of the sensor: the stop '
+                         'or a semi-diameter blocks the axial beam')
+    ri = area / area[0]
+    fraction = None
+    if with_fraction:
+        stop_only = beam_area(system.without_semi_diameters(), heights)
+        with np.errstate(invalid='ignore', divide='ignore'):
+            fraction = np.where(stop_only > 0, np.minimum(1.0, area / stop_only), 0.0)
+    return Illumination(heights, ri, fraction, corner, float(np.interp(corner, heights, ri)))
+
+
+# ---------------------------------------------------------------------------------------------
+# Independent reference: forward flux count
+# ---------------------------------------------------------------------------------------------
+
+def _r2_sequence(count: int, dims: int, rng: np.random.Generator) -> FloatArray:
+    """Return ``count`` points of Roberts' R_d low-discrepancy sequence, randomly shifted."""
+    phi = 2.0
+    for _ in range(64):
+        phi = (1.0 + phi) ** (1.0 / (dims + 1))
+    alpha = (1.0 / phi) ** np.arange(1, dims + 1)
+    n = np.arange(1, count + 1, dtype=np.float64)[:, None]
+    return np.mod(rng.random(dims)[None, :] + n * alpha[None, :], 1.0)
+
+
+def _disk(u: FloatArray, v: FloatArray, radius: float) -> tuple[FloatArray, FloatArray]:
+    r = radius * np.sqrt(u)
+    return r * np.cos(2.0 * math.pi * v), r * np.sin(2.0 * math.pi * v)
+
+
+def forward_flux(prescription: Prescription, stop_radius_mm: float, stop_surface: int | None,
+                 object_distance_mm: float, sensor_radius_mm: float, *, bins: int = 8,
+                 rays: int = 2_000_000, entrance_radius_mm: float, field_cosine: float,
+                 chunk: int = 250_000, seed: int = 0) -> tuple[FloatArray, FloatArray]:
+    """
+    Count the flux a uniform Lambertian scene sends onto the sensor, ray by ray (reference).
+
+    Rays are spread uniformly (a randomly shifted R_4 sequence) over the scene and over a disk
+    of radius ``entrance_radius_mm`` on the first-vertex plane z = 0: for a scene at infinity
+    uniform in the object-space direction cosines (|k| <= ``field_cosine``; every ray then
+    carries the same etendue), for a scene at distance l each ray from a point of the object
+    plane to a point of the entrance disk carries d^2 / D^4 (cos^2 / D^2 between parallel
+    planes, D the ray's length, d the planes' distance). They are traced forwards through
+    every aperture and binned where they cross the sensor plane, in ``bins`` annuli of equal
+    area up to ``sensor_radius_mm``. The disks must contain every ray that reaches the sensor
+    within that radius (choose them generously).
+
+    :param prescription: the lens.
+    :param stop_radius_mm: clear radius of the stop.
+    :param stop_surface: surface carrying the stop, None for the stop plane.
+    :param object_distance_mm: l from the front principal plane (``math.inf`` allowed).
+    :param sensor_radius_mm: outer radius of the last annulus.
+    :param bins: number of annuli.
+    :param rays: number of rays.
+    :param entrance_radius_mm: radius of the entrance disk on z = 0.
+    :param field_cosine: for l = inf the largest direction cosine, else the object-plane disk
+        radius divided by l.
+    :param chunk: rays per batch.
+    :param seed: shift of the sequence.
+    :return: ``(edges_mm, irradiance)``: the annuli's radii (bins + 1) and the flux per unit
+        area in each for unit radiance (projected sr: E / L).
+    """
+    rng = np.random.default_rng(seed)
+    system = lens_system(prescription, stop_radius_mm, stop_surface)
+    sensor_z, _ = image_plane(prescription, object_distance_mm)
+    flux = np.zeros(bins)
+    infinite = math.isinf(object_distance_mm)
+    if not infinite:
+        object_z = paraxial(prescription).front_principal_z_mm - object_distance_mm
+        object_radius = field_cosine * object_distance_mm
+    points = _r2_sequence(rays, 4, rng)
+    for start in range(0, rays, chunk):
+        u = points[start:start + chunk]
+        x, y = _disk(u[:, 0], u[:, 1], entrance_radius_mm)
+        if infinite:
+            kx, ky = _disk(u[:, 2], u[:, 3], field_cosine)
+            kz = np.sqrt(1.0 - kx * kx - ky * ky)
+            weight = np.ones_like(x)
+        else:
+            ox, oy = _disk(u[:, 2], u[:, 3], object_radius)
+            dx, dy, dz = x - ox, y - oy, -object_z
+            length = np.sqrt(dx * dx + dy * dy + dz * dz)
+            kx, ky, kz = dx / length, dy / length, dz / length
+            weight = dz * dz / length ** 4
+        ok, (ex, ey, ez, ekx, eky, ekz) = trace_pass(system, x, y, 0.0, kx, ky, kz)
+        s = (sensor_z - ez[ok]) / ekz[ok]
+        r2 = (ex[ok] + s * ekx[ok]) ** 2 + (ey[ok] + s * eky[ok]) ** 2
+        index = np.floor(bins * r2 / sensor_radius_mm ** 2).astype(np.int64)
+        keep = index < bins
+        flux += np.bincount(index[keep], weights=weight[ok][keep], minlength=bins)
+    edges = sensor_radius_mm * np.sqrt(np.arange(bins + 1) / bins)
+    # Monte Carlo measure of one ray: the entrance disk times the scene disk (in direction
+    # cosines or on the object plane), over the number of rays.
+    scene = field_cosine if infinite else object_radius
+    measure = math.pi * entrance_radius_mm ** 2 * math.pi * scene ** 2 / rays
+    area = math.pi * sensor_radius_mm ** 2 / bins
+    return edges, flux * measure / area
+
+
+def annulus_means(illumination_height_mm: FloatArray, ri: FloatArray,
+                  edges_mm: FloatArray, points: int = 64) -> FloatArray:
+    """
+    Average a traced RI curve over annuli (area-weighted), to compare with binned flux.
+
+    :param illumination_height_mm: the curve's heights.
+    :param ri: the curve's values.
+    :param edges_mm: annulus radii.
+    :param points: quadrature points per annulus (midpoint rule in r^2).
+    :return: the mean RI of each annulus.
+    """
+    out = []
+    for a, b in zip(edges_mm[:-1], edges_mm[1:]):
+        r2 = a * a + (np.arange(points) + 0.5) / points * (b * b - a * a)
+        out.append(float(np.mean(np.interp(np.sqrt(r2), illumination_height_mm, ri))))
+    return np.array(out)

@@ -1,0 +1,238 @@
+# Copyright 2026 The mechdeconv_ros Authors.
+# SPDX-License-Identifier: Apache-2.0
+"""
+Exact 3-D (skew) ray tracing through a rotationally symmetric lens, with every aperture.
+
+Pure numpy, no ROS. The meridional trace of :mod:`mechdeconv_ros.raytrace` finds chief rays;
+the irradiance of a sensor point needs whole beams, skew rays included, and every aperture
+that clips them: the aperture stop, each surface's clear semi-diameter and the lens edges.
+
+Conventions as in :mod:`mechdeconv_ros.raytrace`: mm, optical axis z, light travels +z, first
+vertex at z = 0, radius > 0 when the centre of curvature lies on the image side. A ray is a
+point (x, y, z) and a unit direction (k_x, k_y, k_z) with k_z > 0.
+
+Surfaces
+--------
+In coordinates local to a vertex (z' = z - z_v) a spherical surface is
+c (x^2 + y^2 + z'^2) - 2 z' = 0 (c = 1/radius, 0 = flat). A ray p + s k meets it after
+
+    s = C / (B + sqrt(B^2 - c C)),   B = k_z - c (p . k),   C = c |p|^2 - 2 z'
+
+(the cancellation-free root on the vertex side), where the unit normal is
+N = (-c x, -c y, 1 - c z'), N_z > 0 on the vertex hemisphere. Refraction from index n to n'
+(vector Snell law, mu = n / n', cos_i = k . N):
+
+    cos_t = sqrt(1 - mu^2 (1 - cos_i^2)),   k' = mu k + (cos_t - mu cos_i) N.
+
+:func:`intersect` and :func:`refract` are the only surface-specific code; aspheric surfaces
+plug in there.
+
+Apertures
+---------
+A ray fails when it misses a surface or meets its far hemisphere (outside the sag's domain),
+must travel backwards by more than 1e-9 mm to reach a later surface (it left the lens body
+through its edge, e.g. where the two faces of a biconvex lens meet), lands outside a non-zero
+semi-diameter, is totally internally reflected, or crosses the aperture stop outside its
+clear radius. The stop is either a plane z = z_s (thick-lens mode: an iris anywhere, also
+inside the glass) or one surface of the prescription (clipped where the ray meets it).
+
+Backward tracing
+----------------
+:func:`reversed_system` mirrors a lens about a plane z = z_0 (z' = z_0 - z): the surfaces in
+reverse order, each radius negated (a sag z(r) becomes -z(r)), the index after a mirrored
+surface is the index before the original one. A ray traced backwards from a sensor point at
+z_0 is then an ordinary forward ray of the mirrored system starting at z' = 0.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import NamedTuple
+
+from mechdeconv_ros.raytrace import Prescription, Surface, vertex_z
+import numpy as np
+
+#: A ray that must travel backwards by more than this to reach a later surface fails.
+BACKWARD_TOLERANCE_MM = 1e-9
+
+_ERRSTATE = {'invalid': 'ignore', 'divide': 'ignore', 'over': 'ignore'}
+
+
+def intersect(surface: Surface, x: np.ndarray, y: np.ndarray, z: np.ndarray,
+              kx: np.ndarray, ky: np.ndarray, kz: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Intersect rays with one surface in its vertex-local frame.
+
+    :param surface: the surface (its vertex at z = 0 of this frame).
+    :param x: ray points, mm (``z`` vertex-local).
+    :param y: see ``x``.
+    :param z: see ``x``.
+    :param kx: unit ray directions.
+    :param ky: see ``kx``.
+    :param kz: see ``kx``.
+    :return: ``(s, nx, ny, nz, bad)``: the path length to the surface, the unit normal there
+        (``nz > 0``) and the rays that miss it or meet it outside the sag's domain.
+    """
+    c = surface.curvature_per_mm
+    with np.errstate(**_ERRSTATE):
+        b = kz - c * (x * kx + y * ky + z * kz)
+        cc = c * (x * x + y * y + z * z) - 2.0 * z
+        s = cc / (b + np.sqrt(b * b - c * cc))
+        px = x + s * kx
+        py = y + s * ky
+        pz = z + s * kz
+        nz = 1.0 - c * pz
+        bad = ~np.isfinite(s) | ~(nz > 0)
+    return s, -c * px, -c * py, nz, bad
+
+
+def refract(kx: np.ndarray, ky: np.ndarray, kz: np.ndarray, nx: np.ndarray, ny: np.ndarray,
+            nz: np.ndarray, n_before: float, n_after: float
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Refract unit directions at unit normals (vector Snell law).
+
+    :return: the refracted unit directions; NaN where the ray is totally internally reflected.
+    """
+    mu = n_before / n_after
+    with np.errstate(**_ERRSTATE):
+        cos_i = kx * nx + ky * ny + kz * nz
+        cos_t = np.sqrt(1.0 - mu * mu * (1.0 - cos_i * cos_i))
+        g = cos_t - mu * cos_i
+        return mu * kx + g * nx, mu * ky + g * ny, mu * kz + g * nz
+
+
+class Element(NamedTuple):
+    """
+    One step of a system: a refracting surface or the stop plane.
+
+    ``surface`` is None for a stop plane (no refraction). ``clear_radius_mm`` clips (0 = no
+    limit); for the stop surface it is the smaller of its semi-diameter and the stop radius.
+    """
+
+    z_mm: float
+    surface: Surface | None
+    n_before: float
+    n_after: float
+    clear_radius_mm: float
+    is_stop: bool
+
+
+@dataclass(frozen=True)
+class System:
+    """An ordered list of elements, traced forwards (+z)."""
+
+    elements: tuple[Element, ...]
+
+    def without_semi_diameters(self) -> System:
+        """Return the system whose only clipping aperture is the stop (edges still clip)."""
+        return System(tuple(e._replace(clear_radius_mm=e.clear_radius_mm if e.is_stop else 0.0)
+                            for e in self.elements))
+
+
+def lens_system(prescription: Prescription, stop_radius_mm: float,
+                stop_surface: int | None = None) -> System:
+    """
+    Describe a lens with its apertures, in its own frame.
+
+    :param prescription: the lens.
+    :param stop_radius_mm: the clear radius of the aperture stop (0 = no stop clipping).
+    :param stop_surface: the surface that carries the stop (prescription mode), or None for a
+        stop plane at ``prescription.stop_z_mm`` (thick-lens mode).
+    :return: the system.
+    """
+    z_v = vertex_z(prescription)
+    elements: list[Element] = []
+    for i, surface in enumerate(prescription.surfaces):
+        radius = float(surface.semi_diameter_mm)
+        is_stop = stop_surface == i
+        if is_stop and stop_radius_mm > 0:
+            radius = min(radius, stop_radius_mm) if radius > 0 else stop_radius_mm
+        elements.append(Element(float(z_v[i]), surface, prescription.index_before(i),
+                                float(surface.refractive_index), radius, is_stop))
+    if stop_surface is None:
+        z_s = float(prescription.stop_z_mm)
+        count = int(np.searchsorted(z_v, z_s, side='right'))
+        index = prescription.index_before(count)
+        elements.insert(count, Element(z_s, None, index, index, float(stop_radius_mm), True))
+    return System(tuple(elements))
+
+
+def _mirror(surface: Surface) -> Surface:
+    """Return the surface seen from behind: every sag coefficient negated."""
+    changes = {'radius_mm': -float(surface.radius_mm)}
+    asphere = getattr(surface, 'asphere', None)
+    if asphere is not None:
+        changes['asphere'] = tuple(-float(a) for a in asphere)
+    return dataclasses.replace(surface, **changes)
+
+
+def reversed_system(system: System, z0_mm: float) -> System:
+    """
+    Mirror a system about the plane z = z0 (module docstring), for backward tracing.
+
+    :param system: the lens.
+    :param z0_mm: the mirror plane, usually the sensor plane (then z' = 0 is the sensor).
+    :return: the mirrored system, elements in reverse order.
+    """
+    out = []
+    for e in reversed(system.elements):
+        surface = None if e.surface is None else _mirror(e.surface)
+        out.append(Element(float(z0_mm) - e.z_mm, surface, e.n_after, e.n_before,
+                           e.clear_radius_mm, e.is_stop))
+    return System(tuple(out))
+
+
+def trace_pass(system: System, x: np.ndarray, y: np.ndarray, z: np.ndarray,
+               kx: np.ndarray, ky: np.ndarray, kz: np.ndarray
+               ) -> tuple[np.ndarray, tuple[np.ndarray, ...]]:
+    """
+    Trace rays through every element and tell which pass.
+
+    :param system: the elements in the order the rays meet them.
+    :param x: starting points, mm, in front of the first element (any shape, broadcast).
+    :param y: see ``x``.
+    :param z: see ``x``.
+    :param kx: unit directions, ``kz > 0``.
+    :param ky: see ``kx``.
+    :param kz: see ``kx``.
+    :return: ``(passed, (x, y, z, kx, ky, kz))``: a boolean mask and the rays after the last
+        element (meaningless where not passed).
+    """
+    x, y, z, kx, ky, kz = np.broadcast_arrays(*(np.asarray(a, dtype=float)
+                                                for a in (x, y, z, kx, ky, kz)))
+    ok = np.isfinite(kz) & (kz > 0)
+    first = True
+    with np.errstate(**_ERRSTATE):
+        for e in system.elements:
+            z_local = z - e.z_mm
+            if e.surface is None:
+                # A stop plane: where the ray's line crosses it, without moving the ray (an
+                # iris close to a curved face may be crossed before or after it).
+                s = -z_local / kz
+                r2 = (x + s * kx) ** 2 + (y + s * ky) ** 2
+                ok &= np.isfinite(s) & ((e.clear_radius_mm <= 0)
+                                        | (r2 <= e.clear_radius_mm * e.clear_radius_mm))
+                continue
+            s, nx, ny, nz, bad = intersect(e.surface, x, y, z_local, kx, ky, kz)
+            if not first:
+                bad |= s < -BACKWARD_TOLERANCE_MM
+            first = False
+            x = x + s * kx
+            y = y + s * ky
+            z = z + s * kz
+            if e.clear_radius_mm > 0:
+                bad |= ~(x * x + y * y <= e.clear_radius_mm * e.clear_radius_mm)
+            if e.n_before != e.n_after:
+                kx, ky, kz = refract(kx, ky, kz, nx, ny, nz, e.n_before, e.n_after)
+                bad |= ~(kz > 0)
+            ok &= ~bad
+    return ok, (x, y, z, kx, ky, kz)
+
+
+def direction_from_cosines(kx: np.ndarray, ky: np.ndarray) -> np.ndarray:
+    """Return k_z = sqrt(1 - k_x^2 - k_y^2) (NaN outside the unit disk)."""
+    with np.errstate(**_ERRSTATE):
+        return np.sqrt(1.0 - kx * kx - ky * ky)
