@@ -58,7 +58,7 @@ from typing import Any, Mapping
 
 from mechdeconv_ros.raytrace import image_plane, paraxial, Prescription
 from mechdeconv_ros.trace3d import (
-    direction_from_cosines, lens_system, reversed_system, System, trace_pass)
+    direction_from_cosines, lens_system, reversed_system, System, trace_margin, trace_pass)
 import numpy as np
 import numpy.typing as npt
 
@@ -67,10 +67,12 @@ FloatArray = npt.NDArray[np.float64]
 #: Heights of the traced RI curve, uniform from the axis to just past the raw image corner.
 RI_SAMPLES = 32
 #: Samples of the meridional (k_x = 0) scan of each height over k_y in (-1, 1).
-SCAN_SAMPLES = 384
-#: Rows of the k_y integration and bisection steps of each edge.
+SCAN_SAMPLES = 128
+#: Rows of the k_y integration, root-finding steps of each edge and the cosine tolerance
+#: below which an edge that needs bisection (a jump of the margin) stops.
 ROWS = 24
-BISECTION_STEPS = 16
+ROOT_STEPS = 6
+EDGE_TOLERANCE = 1e-7
 #: Multiples of the meridional half-width probed to bracket each row's half-width.
 PROBE_FACTORS = (0.8, 1.25, 1.6, 2.5, 4.0, 8.0)
 
@@ -147,29 +149,64 @@ def backward_system(prescription: Prescription, stop_radius_mm: float,
     return reversed_system(system, sensor_z_mm)
 
 
-def _passes(system: System, height: FloatArray, kx: FloatArray, ky: FloatArray) -> np.ndarray:
-    """Return which backward rays from (0, height, 0) with cosines (kx, ky) pass."""
+def _margin(system: System, height: FloatArray, kx: FloatArray, ky: FloatArray) -> np.ndarray:
+    """Return the aperture margins of backward rays from (0, height, 0), cosines (kx, ky)."""
     kz = direction_from_cosines(kx, ky)
-    ok, _ = trace_pass(system, 0.0, height, 0.0, kx, ky, kz)
-    return ok
+    return trace_margin(system, 0.0, height, 0.0, kx, ky, kz)
 
 
-def _bisect(system: System, height: FloatArray, fixed: FloatArray, good: FloatArray,
-            bad: FloatArray, along_x: bool, steps: int) -> FloatArray:
-    """Bisect between passing and failing cosines (along k_x or k_y) to the edge."""
-    good = good.copy()
-    bad = bad.copy()
+def _edge(system: System, height: FloatArray, fixed: FloatArray, a: FloatArray,
+          fa: FloatArray, b: FloatArray, fb: FloatArray, along_x: bool,
+          steps: int) -> FloatArray:
+    """
+    Locate the rim between a passing cosine ``a`` and a failing one ``b`` (along k_x or k_y).
+
+    The Illinois variant of regula falsi on the continuous aperture margin converges in a
+    few steps where an aperture rim clips; where the margin jumps (TIR, a lens edge) the
+    unconverged entries finish by bisection.
+    """
+    def margin(index: np.ndarray, c: FloatArray) -> np.ndarray:
+        if along_x:
+            return _margin(system, height[index], c, fixed[index])
+        return _margin(system, height[index], fixed[index], c)
+
+    a, fa, b, fb = (np.array(v, dtype=np.float64) for v in (a, fa, b, fb))
+    wa, wb = fa.copy(), fb.copy()
+    side = np.zeros(a.shape, dtype=np.int8)
+    every = np.arange(a.size)
     for _ in range(steps):
-        mid = 0.5 * (good + bad)
-        ok = (_passes(system, height, mid, fixed) if along_x
-              else _passes(system, height, fixed, mid))
-        good = np.where(ok, mid, good)
-        bad = np.where(ok, bad, mid)
-    return 0.5 * (good + bad)
+        with np.errstate(invalid='ignore', divide='ignore'):
+            c = (a * wb - b * wa) / (wb - wa)
+        inside = (c - a) * (c - b) < 0.0
+        c = np.where(inside, c, 0.5 * (a + b))
+        fc = margin(every, c)
+        keep = fc >= 0.0
+        a = np.where(keep, c, a)
+        fa = np.where(keep, fc, fa)
+        wa = np.where(keep, fc, np.where(side < 0, 0.5 * wa, wa))
+        b = np.where(keep, b, c)
+        fb = np.where(keep, fb, fc)
+        wb = np.where(keep, np.where(side > 0, 0.5 * wb, wb), fc)
+        side = np.where(keep, 1, -1).astype(np.int8)
+    # The edge by linear interpolation of the true margins in the final bracket.
+    with np.errstate(invalid='ignore', divide='ignore'):
+        c = (a * fb - b * fa) / (fb - fa)
+    c = np.where((c - a) * (c - b) <= 0.0, c, 0.5 * (a + b))
+    slow = np.flatnonzero(np.abs(b - a) > EDGE_TOLERANCE)
+    slow = slow[(fb[slow] < -0.5) | ~np.isfinite(c[slow])]
+    if slow.size:
+        lo, hi = a[slow], b[slow]
+        while np.max(np.abs(hi - lo)) > EDGE_TOLERANCE:
+            mid = 0.5 * (lo + hi)
+            ok = margin(slow, mid) >= 0.0
+            lo = np.where(ok, mid, lo)
+            hi = np.where(ok, hi, mid)
+        c[slow] = 0.5 * (lo + hi)
+    return c
 
 
 def beam_area(system: System, heights_mm: FloatArray, *, scan: int = SCAN_SAMPLES,
-              rows: int = ROWS, steps: int = BISECTION_STEPS) -> FloatArray:
+              rows: int = ROWS, steps: int = ROOT_STEPS) -> FloatArray:
     """
     Return the projected solid angle of the passing directions at each sensor height.
 
@@ -177,16 +214,17 @@ def beam_area(system: System, heights_mm: FloatArray, *, scan: int = SCAN_SAMPLE
     :param heights_mm: sensor points (0, h), any shape.
     :param scan: samples of the meridional scan.
     :param rows: rows of the k_y integration.
-    :param steps: bisection steps per edge.
+    :param steps: root-finding steps per edge.
     :return: Omega_p in steradians (projected), same shape; 0 where no ray passes.
     """
     heights = np.asarray(heights_mm, dtype=np.float64)
     h = heights.ravel()
     area = np.zeros(h.size)
     ky = -1.0 + (np.arange(scan) + 0.5) * (2.0 / scan)
-    through = _passes(system, h[:, None], np.zeros(1), ky[None, :])
+    scanned = _margin(system, h[:, None], np.zeros(1), ky[None, :])
+    through = scanned >= 0.0
     missed = np.flatnonzero(~through.any(axis=1))
-    if missed.size and scan < 16 * SCAN_SAMPLES:
+    if missed.size and scan < 32 * SCAN_SAMPLES:
         # A beam narrower than the scan step (a tiny stop, or the last sliver of a vignetted
         # field): look again, 16 times finer, at those heights only.
         area[missed] = beam_area(system, h[missed], scan=16 * scan, rows=rows, steps=steps)
@@ -194,15 +232,22 @@ def beam_area(system: System, heights_mm: FloatArray, *, scan: int = SCAN_SAMPLE
     if live.size == 0:
         return area.reshape(heights.shape)
     through = through[live]
+    scanned = scanned[live]
     hl = h[live]
+    n = hl.size
     lo = np.argmax(through, axis=1)
     hi = scan - 1 - np.argmax(through[:, ::-1], axis=1)
+    rows_n = np.arange(n)
+    below, above = np.maximum(lo - 1, 0), np.minimum(hi + 1, scan - 1)
     good = np.concatenate((ky[lo], ky[hi]))
-    bad = np.concatenate((np.where(lo > 0, ky[lo - 1], -1.0),
-                          np.where(hi < scan - 1, ky[np.minimum(hi + 1, scan - 1)], 1.0)))
-    edges = _bisect(system, np.concatenate((hl, hl)), np.zeros(2 * hl.size), good, bad,
-                    False, steps)
-    k_lo, k_hi = edges[:hl.size], edges[hl.size:]
+    f_good = np.concatenate((scanned[rows_n, lo], scanned[rows_n, hi]))
+    bad = np.concatenate((np.where(lo > 0, ky[below], -1.0), np.where(hi < scan - 1,
+                                                                      ky[above], 1.0)))
+    f_bad = np.concatenate((np.where(lo > 0, scanned[rows_n, below], -1.0),
+                            np.where(hi < scan - 1, scanned[rows_n, above], -1.0)))
+    edges = _edge(system, np.concatenate((hl, hl)), np.zeros(2 * n), good, f_good, bad, f_bad,
+                  False, steps)
+    k_lo, k_hi = edges[:n], edges[n:]
     centre = 0.5 * (k_lo + k_hi)[:, None]
     radius = 0.5 * (k_hi - k_lo)[:, None]
     t = (np.arange(rows) + 0.5) * (math.pi / rows)
@@ -210,19 +255,21 @@ def beam_area(system: System, heights_mm: FloatArray, *, scan: int = SCAN_SAMPLE
     row_h = np.broadcast_to(hl[:, None], row_ky.shape)
     kmax = np.sqrt(np.maximum(0.0, 1.0 - row_ky * row_ky)) * (1.0 - 1e-12)
     # A first bracket from the meridional half-width (exact for a circle; an off-axis beam is
-    # wider sagittally), then bisection.
+    # wider sagittally), then the rim.
     guess = radius * np.sin(t)[None, :]
-    factors = np.array(PROBE_FACTORS)[:, None, None]
+    factors = np.array((0.0,) + PROBE_FACTORS)[:, None, None]
     probe = np.minimum(factors * guess[None], kmax[None])
-    ok = _passes(system, row_h[None], probe, row_ky[None])
-    centre_ok = _passes(system, row_h, np.zeros(1), row_ky)
-    # Largest passing probe (or 0) and the next one (or k_max): a bracket of the edge.
-    count = np.sum(np.cumprod(ok, axis=0), axis=0)
-    padded = np.concatenate((np.zeros((1,) + kmax.shape), probe, kmax[None]))
-    good = np.take_along_axis(padded, count[None], axis=0)[0]
-    bad = np.take_along_axis(padded, count[None] + 1, axis=0)[0]
-    half = _bisect(system, row_h.ravel(), row_ky.ravel(), good.ravel(), bad.ravel(), True,
-                   max(4, steps - 4)).reshape(row_ky.shape)
+    f_probe = _margin(system, row_h[None], probe, row_ky[None])
+    centre_ok = f_probe[0] >= 0.0
+    # Largest passing probe and the next one (or k_max): a bracket of the rim.
+    count = np.sum(np.cumprod(f_probe >= 0.0, axis=0), axis=0)
+    count = np.maximum(count, 1)
+    padded = np.concatenate((probe, kmax[None]))
+    f_padded = np.concatenate((f_probe, -np.ones((1,) + kmax.shape)))
+    pick = [np.take_along_axis(v, (count + d - 1)[None], axis=0)[0]
+            for v in (padded, f_padded) for d in (0, 1)]
+    half = _edge(system, row_h.ravel(), row_ky.ravel(), pick[0].ravel(), pick[2].ravel(),
+                 pick[1].ravel(), pick[3].ravel(), True, steps).reshape(row_ky.shape)
     half = np.where(centre_ok, half, 0.0)
     area[live] = (math.pi / rows) * np.sum(2.0 * half * radius * np.sin(t)[None, :], axis=1)
     return area.reshape(heights.shape)

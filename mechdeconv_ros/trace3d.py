@@ -201,9 +201,34 @@ def trace_pass(system: System, x: np.ndarray, y: np.ndarray, z: np.ndarray,
     :return: ``(passed, (x, y, z, kx, ky, kz))``: a boolean mask and the rays after the last
         element (meaningless where not passed).
     """
+    margin, rays = _trace(system, x, y, z, kx, ky, kz)
+    return margin >= 0.0, rays
+
+
+def trace_margin(system: System, x: np.ndarray, y: np.ndarray, z: np.ndarray,
+                 kx: np.ndarray, ky: np.ndarray, kz: np.ndarray) -> np.ndarray:
+    """
+    Trace rays and return how far inside the clear apertures they pass.
+
+    The margin is min over the clipping apertures of (R - r) / R, r the ray's radius where it
+    meets an aperture of clear radius R (1 without any), and -1 for a ray that fails in any
+    other way (miss, lens edge, TIR). A ray passes when its margin is >= 0; across an aperture
+    rim the margin is continuous, which lets a root finder locate the rim in a few steps.
+
+    :param system: the elements in the order the rays meet them.
+    :return: the margins (the broadcast shape of the inputs).
+    """
+    return _trace(system, x, y, z, kx, ky, kz)[0]
+
+
+def _trace(system: System, x: np.ndarray, y: np.ndarray, z: np.ndarray,
+           kx: np.ndarray, ky: np.ndarray, kz: np.ndarray
+           ) -> tuple[np.ndarray, tuple[np.ndarray, ...]]:
+    """Return the margins (:func:`trace_margin`) and the rays after the last element."""
     x, y, z, kx, ky, kz = np.broadcast_arrays(*(np.asarray(a, dtype=float)
                                                 for a in (x, y, z, kx, ky, kz)))
-    ok = np.isfinite(kz) & (kz > 0)
+    bad = ~(kz > 0)
+    margin = np.ones(bad.shape)
     first = True
     with np.errstate(**_ERRSTATE):
         for e in system.elements:
@@ -212,11 +237,13 @@ def trace_pass(system: System, x: np.ndarray, y: np.ndarray, z: np.ndarray,
                 # A stop plane: where the ray's line crosses it, without moving the ray (an
                 # iris close to a curved face may be crossed before or after it).
                 s = -z_local / kz
-                r2 = (x + s * kx) ** 2 + (y + s * ky) ** 2
-                ok &= np.isfinite(s) & ((e.clear_radius_mm <= 0)
-                                        | (r2 <= e.clear_radius_mm * e.clear_radius_mm))
+                bad |= ~np.isfinite(s)
+                if e.clear_radius_mm > 0:
+                    r = np.hypot(x + s * kx, y + s * ky)
+                    np.fmin(margin, 1.0 - r / e.clear_radius_mm, out=margin)
                 continue
-            s, nx, ny, nz, bad = intersect(e.surface, x, y, z_local, kx, ky, kz)
+            s, nx, ny, nz, failed = intersect(e.surface, x, y, z_local, kx, ky, kz)
+            bad |= failed
             if not first:
                 bad |= s < -BACKWARD_TOLERANCE_MM
             first = False
@@ -224,12 +251,12 @@ def trace_pass(system: System, x: np.ndarray, y: np.ndarray, z: np.ndarray,
             y = y + s * ky
             z = z + s * kz
             if e.clear_radius_mm > 0:
-                bad |= ~(x * x + y * y <= e.clear_radius_mm * e.clear_radius_mm)
+                np.fmin(margin, 1.0 - np.hypot(x, y) / e.clear_radius_mm, out=margin)
             if e.n_before != e.n_after:
                 kx, ky, kz = refract(kx, ky, kz, nx, ny, nz, e.n_before, e.n_after)
                 bad |= ~(kz > 0)
-            ok &= ~bad
-    return ok, (x, y, z, kx, ky, kz)
+    margin[bad | np.isnan(margin)] = -1.0
+    return margin, (x, y, z, kx, ky, kz)
 
 
 def direction_from_cosines(kx: np.ndarray, ky: np.ndarray) -> np.ndarray:
