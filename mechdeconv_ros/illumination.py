@@ -413,3 +413,77 @@ def annulus_means(illumination_height_mm: FloatArray, ri: FloatArray,
         r2 = a * a + (np.arange(points) + 0.5) / points * (b * b - a * a)
         out.append(float(np.mean(np.interp(np.sqrt(r2), illumination_height_mm, ri))))
     return np.array(out)
+
+
+# ---------------------------------------------------------------------------------------------
+# Export
+# ---------------------------------------------------------------------------------------------
+
+def raw_attenuation(model: Any, illumination: Illumination | None = None) -> FloatArray:
+    """
+    Return the relative illumination at every raw pixel (DSO / TUM monoVO ``vignette.png``).
+
+    :param model: the lens model.
+    :param illumination: its curve (default: traced).
+    :return: ``(height, width)`` float64, RI at each pixel centre's real radius (pixel pitch
+        per axis, radius from the principal point ``K``).
+    """
+    curve = illumination or model.illumination(with_fraction=False)
+    x = (np.arange(model.width) - model.K[0, 2]) * model.pixel_mm[0]
+    y = (np.arange(model.height) - model.K[1, 2]) * model.pixel_mm[1]
+    return curve.at(np.hypot(x[None, :], y[:, None]))
+
+
+@dataclass(frozen=True)
+class LensfunFit:
+    """
+    A lensfun ``pa`` vignetting entry: Cd = Cs (1 + k1 r^2 + k2 r^4 + k3 r^6).
+
+    r is normalised to the half-diagonal of the image (r = 1 at the corner), as lensfun
+    defines it for vignetting; ``max_error_pts`` is the largest |fit - RI| over r in [0, 1],
+    in percentage points.
+    """
+
+    k1: float
+    k2: float
+    k3: float
+    max_error_pts: float
+    focal_mm: float
+    f_number: float
+    distance_m: float
+
+    def xml(self) -> str:
+        """Return the ``<vignetting model="pa" .../>`` element."""
+        return (f'<vignetting model="pa" focal="{self.focal_mm:.4g}" '
+                f'aperture="{self.f_number:.3g}" distance="{self.distance_m:.4g}" '
+                f'k1="{self.k1:.6g}" k2="{self.k2:.6g}" k3="{self.k3:.6g}"/>')
+
+
+#: lensfun's distance for a scene at infinity (metres): its database uses 1000 for "far".
+LENSFUN_INFINITY_M = 1000.0
+
+
+def lensfun_fit(model: Any, illumination: Illumination | None = None,
+                samples: int = 201) -> LensfunFit:
+    """
+    Fit lensfun's ``pa`` vignetting polynomial to the traced RI (linear least squares).
+
+    :param model: the lens model (focal length, f-number, scene distance, sensor).
+    :param illumination: its curve (default: traced).
+    :param samples: radii, uniform in r from 0 to 1 (the half-diagonal).
+    :return: the fit.
+    """
+    curve = illumination or model.illumination(with_fraction=False)
+    half_diagonal = math.hypot(model.width / 2.0 * model.pixel_mm[0],
+                               model.height / 2.0 * model.pixel_mm[1])
+    r = np.linspace(0.0, 1.0, samples)
+    ri = curve.at(r * half_diagonal)
+    r2 = r * r
+    basis = np.stack([r2, r2 * r2, r2 * r2 * r2], axis=1)
+    k, *_ = np.linalg.lstsq(basis, ri - 1.0, rcond=None)
+    error = float(np.max(np.abs(1.0 + basis @ k - ri))) * 100.0
+    distance = float(model.values['scene.distance_mm'])
+    summary = model.summary
+    return LensfunFit(float(k[0]), float(k[1]), float(k[2]), error,
+                      float(model.focal_length_mm), float(summary['f_number']),
+                      distance / 1000.0 if distance > 0 else LENSFUN_INFINITY_M)

@@ -38,6 +38,7 @@ import math
 from typing import Any, Callable, Mapping
 
 from mechdeconv_ros import constraints
+from mechdeconv_ros.illumination import Illumination, relative_illumination
 from mechdeconv_ros.optics import biconvex_for_focal_length, propagate_sigma, thick_lens
 from mechdeconv_ros.params import (
     check_values, INTERPOLATIONS, MAX_FRAME_PIXELS, ParamValue)
@@ -150,6 +151,24 @@ class LensModel:
     max_displacement_px: float
     interpolation: int
     _summary_cache: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
+    _illumination_cache: dict[bool, Illumination] = field(default_factory=dict, repr=False,
+                                                          compare=False)
+
+    def illumination(self, with_fraction: bool = True) -> Illumination:
+        """
+        Return the relative illumination traced over the sensor, computed on first use.
+
+        :param with_fraction: also trace the stop-only beam (``pupil_pass_fraction``), which
+            doubles the cost; the gain map does not need it.
+        :return: the curve (:func:`mechdeconv_ros.illumination.relative_illumination`).
+        :raises ValueError: when not even the axial beam passes the lens.
+        """
+        cached = self._illumination_cache.get(True) or self._illumination_cache.get(
+            with_fraction)
+        if cached is None:
+            cached = relative_illumination(self, with_fraction=with_fraction)
+            self._illumination_cache[with_fraction] = cached
+        return cached
 
     @property
     def summary(self) -> dict[str, Any]:
@@ -215,6 +234,11 @@ class LensModel:
         """
         step = max(1, len(self.curve.ideal_mm) // 256)
         out = dict(self.summary)
+        try:
+            illumination: dict[str, Any] | None = self.illumination().report()
+        except ValueError as err:
+            illumination = None
+            out['warnings'] = list(out['warnings']) + [f'relative illumination: {err}']
         out.update({
             'width_px': self.width, 'height_px': self.height,
             'out_width_px': self.out_width, 'out_height_px': self.out_height,
@@ -227,6 +251,7 @@ class LensModel:
                 'ideal_height_mm': self.curve.ideal_mm[::step].tolist(),
                 'real_height_mm': self.curve.real_mm[::step].tolist(),
             },
+            'relative_illumination': illumination,
         })
         return _json_safe(out)
 
