@@ -41,9 +41,10 @@ from mechdeconv_ros import constraints
 from mechdeconv_ros.illumination import Illumination, relative_illumination
 from mechdeconv_ros.optics import biconvex_for_focal_length, propagate_sigma, thick_lens
 from mechdeconv_ros.params import (
-    check_values, INTERPOLATIONS, MAX_FRAME_PIXELS, ParamValue)
+    ASPHERE_POWERS, check_values, INTERPOLATIONS, MAX_FRAME_PIXELS, ParamValue)
 from mechdeconv_ros.raytrace import (
     image_plane, paraxial, Prescription, Surface, trace_chief_rays, vertex_z)
+from mechdeconv_ros.surfaces import domain_limit_mm
 import numpy as np
 import numpy.typing as npt
 import yaml
@@ -350,15 +351,41 @@ def _surface_prescription(values: Mapping[str, Any]) -> Prescription:
     if arrays['refractive_index'][-1] != 1.0:
         raise ModelError('lens.surfaces.refractive_index',
                          'the last surface must end in air (index 1.0): the sensor is in air')
+    conics = _per_surface(values, 'lens.surfaces.conic', count)
+    terms = [_per_surface(values, f'lens.surfaces.asphere_a{p}', count) for p in ASPHERE_POWERS]
     surfaces = tuple(
-        Surface(float(r), float(t), float(n), float(s))
-        for r, t, n, s in zip(radii, arrays['thickness_mm'], arrays['refractive_index'],
-                              arrays['semi_diameter_mm']))
+        Surface(float(r), float(t), float(n), float(s), conics[i],
+                tuple(term[i] for term in terms))
+        for i, (r, t, n, s) in enumerate(zip(radii, arrays['thickness_mm'],
+                                             arrays['refractive_index'],
+                                             arrays['semi_diameter_mm'])))
+    for i, surface in enumerate(surfaces):
+        limit = domain_limit_mm(surface)
+        if 0.0 < surface.semi_diameter_mm and limit < surface.semi_diameter_mm:
+            raise ModelError('lens.surfaces.conic',
+                             f'surface {i}: k = {surface.conic:g} with radius '
+                             f'{surface.radius_mm:g} mm leaves the sag undefined beyond r = '
+                             f'{limit:.4g} mm, inside its semi-diameter '
+                             f'{surface.semi_diameter_mm:g} mm')
     try:
         probe = Prescription(surfaces, 0.0)
         return Prescription(surfaces, float(vertex_z(probe)[stop]))
     except ValueError as err:
         raise ModelError('lens.surfaces.radius_mm', str(err)) from None
+
+
+def _per_surface(values: Mapping[str, Any], key: str, count: int) -> list[float]:
+    """Return the array ``key`` with one value per surface (empty = all 0)."""
+    array = [float(v) for v in values.get(key, [])]
+    if not array:
+        return [0.0] * count
+    if len(array) != count:
+        raise ModelError(key, f'has {len(array)} values but lens.surfaces.radius_mm has '
+                              f'{count}: give one per surface, or none for all 0')
+    for i, value in enumerate(array):
+        if not math.isfinite(value):
+            raise ModelError(key, f'value {i} is {value}: coefficients must be finite')
+    return array
 
 
 def _scene_distance(values: Mapping[str, Any]) -> float:

@@ -31,6 +31,10 @@ import yaml
 
 ParamValue = Union[bool, int, float, str, list]
 
+#: Powers of r of the even asphere terms, ``lens.surfaces.asphere_a4`` ... ``asphere_a16``.
+ASPHERE_POWERS = (4, 6, 8, 10, 12, 14, 16)
+#: Allowed values of ``output.projection``: the corrected image's projection.
+PROJECTIONS = ('pinhole', 'equidistant')
 #: Allowed values of ``output.interpolation`` and the OpenCV flag names they stand for.
 INTERPOLATIONS = ('nearest', 'linear', 'cubic', 'lanczos4')
 
@@ -131,6 +135,12 @@ SCHEMA: tuple[ParamSpec, ...] = (
     _a('lens.surfaces.semi_diameter_mm', 'mm',
        'Prescription mode: clear semi-diameter of each surface (0 = unlimited); empty = all '
        'unlimited.', 0.0, 1.0e4),
+    _a('lens.surfaces.conic', '1',
+       'Prescription mode: conic constant k of each surface (0 sphere, -1 paraboloid, < -1 '
+       'hyperboloid); empty = all spheres.', -1.0e3, 1.0e3),
+    *(_a(f'lens.surfaces.asphere_a{p}', f'mm^{1 - p}',
+         f'Prescription mode: even asphere coefficient a{p} of each surface (sag term '
+         f'a{p} r^{p}); empty = all 0.', -1.0e6, 1.0e6) for p in ASPHERE_POWERS),
     _i('lens.stop_surface', 0, '1',
        'Prescription mode: 0-based index of the surface whose axial point the chief ray '
        'crosses (the aperture stop).', 0, 255),

@@ -5,8 +5,9 @@ Exact meridional ray tracing of rotationally symmetric lenses, and their paraxia
 
 Pure numpy, no ROS. This is how mechdeconv_ros computes distortion (DESIGN.md section 2,
 "trace the chief ray"): the real chief ray from each object point is found by ray aiming and
-refracted exactly by Snell's law at every spherical surface; where it crosses the sensor is
-the real image height.
+refracted exactly by Snell's law at every surface (sphere, conic or even asphere: the
+geometry is in :mod:`mechdeconv_ros.surfaces`); where it crosses the sensor is the real image
+height.
 
 Conventions
 -----------
@@ -26,7 +27,9 @@ vertex (z' = z - z_v) a surface is c (y^2 + z'^2) - 2 z' = 0. The ray meets it a
     s = C / (B + sqrt(B^2 - c C)),   B = k_z - c (y k_y + z' k_z),   C = c (y^2 + z'^2) - 2 z'
 
 (the cancellation-free root on the vertex side; c = 0 gives the plane s = -z'/k_z). The
-unit surface normal there is N = (-c y, 1 - c z'). Refraction from index n to n' (vector
+unit surface normal there is N = (-c y, 1 - c z'). Conic and aspheric surfaces are met by
+Newton's method from the conic's root (:func:`surfaces.intersect`, the sphere above is its
+closed-form special case). Refraction from index n to n' (vector
 Snell law, mu = n/n'):
 
     sin_i = k x N,  cos_i = k . N,  cos_t = sqrt(1 - mu^2 sin_i^2),
@@ -79,6 +82,7 @@ from dataclasses import dataclass
 import math
 from typing import NamedTuple
 
+from mechdeconv_ros import surfaces
 import numpy as np
 
 #: |1/f| below this (1/mm) is treated as an afocal system.
@@ -91,6 +95,11 @@ MAX_AIM_ITERATIONS = 40
 MAX_STEP_HALVINGS = 20
 MAX_START_HALVINGS = 12
 STALL_ITERATIONS = 3
+#: Windows of ray aiming continued from solved neighbours (wide fields, see _aim_continued).
+CONTINUATION_PASSES = 64
+#: Newton iterations and step halvings from an extrapolated start (it is close: few needed).
+CONTINUATION_ITERATIONS = 12
+CONTINUATION_HALVINGS = 8
 #: A ray that must travel backwards by more than this to reach a surface fails.
 BACKWARD_TOLERANCE_MM = 1e-9
 
@@ -111,23 +120,46 @@ def finite_number(what: str, value: object) -> float:
 @dataclass(frozen=True)
 class Surface:
     """
-    One spherical (or flat) refracting surface.
+    One refracting surface: spherical, flat, conic or even asphere.
 
     ``radius_mm`` is signed (> 0: centre of curvature on the image side, 0 = flat),
     ``thickness_mm`` the axial distance to the next surface (ignored for the last one),
-    ``refractive_index`` the index after the surface (1.0 = air) and ``semi_diameter_mm``
-    the clear semi-aperture (0 = unlimited). Values are checked by :class:`Prescription`.
+    ``refractive_index`` the index after the surface (1.0 = air), ``semi_diameter_mm``
+    the clear semi-aperture (0 = unlimited), ``conic`` the conic constant k and ``asphere``
+    the coefficients a4, a6, ..., a16 (up to seven, mm^(1-2j)); see :mod:`surfaces` for the
+    sag. The defaults (k = 0, no asphere) are the sphere. Values are checked by
+    :class:`Prescription`.
     """
 
     radius_mm: float
     thickness_mm: float
     refractive_index: float
     semi_diameter_mm: float = 0.0
+    conic: float = 0.0
+    asphere: tuple[float, ...] = ()
 
     @property
     def curvature_per_mm(self) -> float:
         """Return the curvature c = 1/r in 1/mm (0 for a flat surface)."""
         return 0.0 if self.radius_mm == 0 else 1.0 / self.radius_mm
+
+
+def _check_shape(i: int, surface: Surface, semi: float) -> None:
+    """Check the conic and asphere coefficients of surface ``i`` (semi-diameter ``semi``)."""
+    conic = finite_number(f'surface {i}: conic', surface.conic)
+    try:
+        terms = tuple(surface.asphere)
+    except TypeError:
+        raise ValueError(f'surface {i}: asphere must be a sequence of a4..a16') from None
+    if len(terms) > surfaces.ASPHERE_TERMS:
+        raise ValueError(f'surface {i}: {len(terms)} asphere coefficients, at most '
+                         f'{surfaces.ASPHERE_TERMS} (a4..a16)')
+    for j, a in enumerate(terms):
+        finite_number(f'surface {i}: asphere a{2 * j + 4}', a)
+    limit = surfaces.domain_limit_mm(surface)
+    if semi > 0 and semi > limit:
+        raise ValueError(f'surface {i}: conic {conic:g} leaves the sag undefined beyond '
+                         f'r = {limit:.4g} mm, inside the semi-diameter {semi:g} mm')
 
 
 @dataclass(frozen=True)
@@ -172,6 +204,7 @@ class Prescription:
             semi = finite_number(f'surface {i}: semi-diameter', surface.semi_diameter_mm)
             if semi < 0:
                 raise ValueError(f'surface {i}: semi-diameter {semi:g} mm < 0')
+            _check_shape(i, surface, semi)
         finite_number('stop position', self.stop_z_mm)
         index = finite_number('object-space refractive index', self.object_index)
         if index < 1:
@@ -335,10 +368,10 @@ def image_plane(prescription: Prescription, object_distance_mm: float) -> tuple[
 def refract(dy: np.ndarray, dz: np.ndarray, normal_y: np.ndarray, normal_z: np.ndarray,
             n_before: float, n_after: float) -> tuple[np.ndarray, np.ndarray]:
     """
-    Refract unit directions at a surface with unit normals (vector Snell law).
+    Refract unit meridional directions at a surface with unit normals (vector Snell law).
 
     The normal points into the second medium (its z component is > 0). The tangential
-    component n sin(i) = n (k x N) is preserved exactly.
+    component n sin(i) = n (k x N) is preserved exactly. See :func:`surfaces.refract`.
 
     :param dy: direction y components.
     :param dz: direction z components.
@@ -349,14 +382,8 @@ def refract(dy: np.ndarray, dz: np.ndarray, normal_y: np.ndarray, normal_z: np.n
     :return: refracted (dy, dz); NaN where the ray is totally internally reflected or hits the
         surface from behind (k . N <= 0).
     """
-    with np.errstate(**_ERRSTATE):
-        mu = n_before / n_after
-        sin_i = dy * normal_z - dz * normal_y
-        cos_i = dy * normal_y + dz * normal_z
-        cos_t = np.sqrt(1.0 - mu * mu * sin_i * sin_i)   # NaN on TIR
-        cos_t = np.where(cos_i > 0, cos_t, np.nan)
-        g = cos_t - mu * cos_i
-        return mu * dy + g * normal_y, mu * dz + g * normal_z
+    _, ky, kz = surfaces.refract(0.0, dy, dz, 0.0, normal_y, normal_z, n_before, n_after)
+    return ky, kz
 
 
 def _nan_where(bad: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -384,22 +411,17 @@ def trace_surfaces(prescription: Prescription, rays: Rays, first: int = 0,
     with np.errstate(**_ERRSTATE):
         for i in range(first, count):
             surface = prescription.surfaces[i]
-            c = surface.curvature_per_mm
             z_local = z - z_vertices[i]
-            b = dz - c * (y * dy + z_local * dz)
-            cc = c * (y * y + z_local * z_local) - 2.0 * z_local
-            s = cc / (b + np.sqrt(b * b - c * cc))   # NaN when the sphere is missed
+            s, _, normal_y, normal_z, bad = surfaces.intersect(
+                surface, 0.0, y, z_local, 0.0, dy, dz)
             y = y + s * dy
             z_local = z_local + s * dz
-            normal_y = -c * y
-            normal_z = 1.0 - c * z_local
-            bad = ~(normal_z > 0) | ~np.isfinite(s)
             if i > first:
                 bad |= s < -BACKWARD_TOLERANCE_MM
             if surface.semi_diameter_mm > 0:
                 bad |= ~(np.abs(y) <= surface.semi_diameter_mm)
-            dy, dz = refract(dy, dz, normal_y, normal_z, prescription.index_before(i),
-                             surface.refractive_index)
+            _, dy, dz = surfaces.refract(0.0, dy, dz, 0.0, normal_y, normal_z,
+                                         prescription.index_before(i), surface.refractive_index)
             bad |= ~(dz > 0)
             y, z, dy, dz = _nan_where(bad, y, z_local + z_vertices[i], dy, dz)
     return Rays(y, z, dy, dz)
@@ -426,7 +448,16 @@ def _rays_from_slope(y0: np.ndarray, z0: float, slope: np.ndarray) -> Rays:
 
 
 class _ChiefRayProblem:
-    """Object geometry and stop of one chief-ray aiming problem."""
+    """
+    Object geometry and stop of one chief-ray aiming problem.
+
+    The field variable ``field`` of every method is the angle theta (rad) to the axis for a
+    scene at infinity (it may pass 90 deg: a fisheye sees behind its first vertex) and
+    tan(theta) = Y / l for a finite distance. The aiming variable ``height`` is the signed
+    distance of the object-space ray from the first vertex, measured perpendicular to the ray
+    for a scene at infinity (the point (h cos theta, h sin theta) in (y, z), so any angle
+    works) and as the height at which it crosses the plane z = 0 for a finite distance.
+    """
 
     def __init__(self, prescription: Prescription, object_distance_mm: float) -> None:
         distance = _check_distance(object_distance_mm)
@@ -445,32 +476,32 @@ class _ChiefRayProblem:
         z_vertices = vertex_z(prescription)
         self.scale = max(1.0, float(z_vertices[-1]), abs(self.stop_z))
 
-    def through_stop_centre(self, tan: np.ndarray) -> Rays:
+    def through_stop_centre(self, field: np.ndarray) -> Rays:
         """Return the rays from the object points through the stop centre (no refraction)."""
+        if self.infinite:
+            return Rays(np.zeros_like(field), np.full_like(field, self.stop_z),
+                        -np.sin(field), np.cos(field))
         with np.errstate(**_ERRSTATE):
-            if self.infinite:
-                slope = -tan
-            else:
-                slope = -(tan * self.distance) / (self.stop_z - self.object_z)
-        return _rays_from_slope(np.zeros_like(tan), self.stop_z, slope)
+            slope = -(field * self.distance) / (self.stop_z - self.object_z)
+        return _rays_from_slope(np.zeros_like(field), self.stop_z, slope)
 
-    def object_rays(self, height: np.ndarray, tan: np.ndarray) -> Rays:
-        """Return the object-space rays that cross the plane z = 0 at ``height``."""
+    def object_rays(self, height: np.ndarray, field: np.ndarray) -> Rays:
+        """Return the object-space rays at offset ``height`` (see the class docstring)."""
+        if self.infinite:
+            cos, sin = np.cos(field), np.sin(field)
+            return Rays(height * cos, height * sin, -sin, cos)
         with np.errstate(**_ERRSTATE):
-            if self.infinite:
-                slope = -tan
-            else:
-                slope = (height - tan * self.distance) / (-self.object_z)
+            slope = (height - field * self.distance) / (-self.object_z)
         return _rays_from_slope(height, 0.0, slope)
 
-    def stop_height(self, height: np.ndarray, tan: np.ndarray) -> np.ndarray:
+    def stop_height(self, height: np.ndarray, field: np.ndarray) -> np.ndarray:
         """Return the height at which the rays of :meth:`object_rays` cross the stop plane."""
-        rays = trace_surfaces(self.prescription, self.object_rays(height, tan), 0,
+        rays = trace_surfaces(self.prescription, self.object_rays(height, field), 0,
                               self.n_before_stop)
         return transfer_to_plane(rays, self.stop_z).y
 
-    def paraxial_height(self, tan: np.ndarray) -> np.ndarray:
-        """Return the height at z = 0 of the paraxial chief ray (towards the entrance pupil)."""
+    def paraxial_height(self, field: np.ndarray) -> np.ndarray:
+        """Return the offset ``height`` of the paraxial chief ray (towards the entrance pupil)."""
         a, b, _, _ = _paraxial_matrix(self.prescription, self.n_before_stop, 0.0, self.stop_z)
         n_object = self.prescription.object_index
         if self.infinite:
@@ -483,36 +514,46 @@ class _ChiefRayProblem:
                              'plane: the chief ray is undefined')
         # Sign of the paraxial dy_stop/dh: the chief ray lies on the branch that keeps it.
         self.branch_sign = math.copysign(1.0, denominator)
-        return tan * (numerator / denominator)
+        # At infinity the height at z = 0 is tan(theta) n/d; its perpendicular offset is
+        # sin(theta) n/d (bounded at any angle).
+        return (np.sin(field) if self.infinite else field) * (numerator / denominator)
+
+    def field_size(self, field: np.ndarray) -> np.ndarray:
+        """Return |sin theta| (infinity) or |tan theta| (finite): scales the tolerance."""
+        return np.abs(np.sin(field)) if self.infinite else np.abs(field)
 
     def value_and_slope(self, height: np.ndarray,
-                        tan: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                        field: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Return y_stop(h) and dy_stop/dh by a forward difference (one stacked trace)."""
         step = np.copysign(1e-7 * (self.scale + np.abs(height)), height)
         both = self.stop_height(np.concatenate((height, height + step)),
-                                np.concatenate((tan, tan)))
+                                np.concatenate((field, field)))
         value = both[:height.size]
         with np.errstate(**_ERRSTATE):
             return value, (both[height.size:] - value) / step
 
 
-def _aim(problem: _ChiefRayProblem, tan: np.ndarray) -> np.ndarray:
+def _aim(problem: _ChiefRayProblem, field: np.ndarray, start: np.ndarray | None = None,
+         iterations: int = MAX_AIM_ITERATIONS, halvings: int = MAX_STEP_HALVINGS) -> np.ndarray:
     """
-    Return the heights h at z = 0 of the chief rays (NaN where aiming failed).
+    Return the aiming offsets h of the chief rays (NaN where aiming failed).
 
-    Newton on y_stop(h) from the paraxial chief ray. A step is accepted when its ray exists,
-    keeps the paraxial sign of dy_stop/dh (the branch of solutions that starts on the axis)
-    and reduces |y_stop|; otherwise it is halved, or, past a fold of y_stop(h), shortened to
-    the root of the local quadratic model. A ray fails (NaN) when that model shows no root
-    ahead, after STALL_ITERATIONS iterations that each reduce |y_stop| by less than 10 %, or
-    when no step can be accepted: there is no real chief ray (the end of the valid field).
+    Newton on y_stop(h) from the paraxial chief ray (or from ``start``), at most ``iterations``
+    steps of at most ``halvings`` halvings each. A step is accepted when its ray exists, keeps
+    the paraxial sign of dy_stop/dh (the branch of solutions that starts on the axis) and
+    reduces |y_stop|; otherwise it is halved, or, past a fold of y_stop(h), shortened to the
+    root of the local quadratic model. A ray fails (NaN) when that model shows no root ahead,
+    after STALL_ITERATIONS iterations that each reduce |y_stop| by less than 10 %, or when no
+    step can be accepted: there is no real chief ray (the end of the valid field).
     """
-    tolerance = STOP_TOLERANCE_MM * np.minimum(1.0, np.abs(tan) + 1e-6)
-    height = problem.paraxial_height(tan)
+    tolerance = STOP_TOLERANCE_MM * np.minimum(1.0, problem.field_size(field) + 1e-6)
+    height = problem.paraxial_height(field)
+    if start is not None:
+        height = np.array(start, dtype=float)
     branch = problem.branch_sign
     with np.errstate(**_ERRSTATE):
         height = np.where(np.isfinite(height), height, np.nan)
-        value, slope = problem.value_and_slope(height, tan)
+        value, slope = problem.value_and_slope(height, field)
         # A paraxial start that fails (large fields): pull it towards the axis.
         for _ in range(MAX_START_HALVINGS):
             retry = np.flatnonzero(~(np.isfinite(value) & (slope * branch > 0))
@@ -520,14 +561,14 @@ def _aim(problem: _ChiefRayProblem, tan: np.ndarray) -> np.ndarray:
             if retry.size == 0:
                 break
             height[retry] *= 0.5
-            value[retry], slope[retry] = problem.value_and_slope(height[retry], tan[retry])
-        result = np.full(tan.shape, np.nan)
+            value[retry], slope[retry] = problem.value_and_slope(height[retry], field[retry])
+        result = np.full(field.shape, np.nan)
         ok = np.isfinite(value) & (slope * branch > 0)
         done = ok & (np.abs(value) <= tolerance)
         result[done] = height[done]
         active = np.flatnonzero(ok & ~done)
-        slow = np.zeros(tan.shape, dtype=int)
-        for _ in range(MAX_AIM_ITERATIONS):
+        slow = np.zeros(field.shape, dtype=int)
+        for _ in range(iterations):
             if active.size == 0:
                 break
             h0, y0, g0 = height[active], value[active], slope[active]
@@ -536,11 +577,11 @@ def _aim(problem: _ChiefRayProblem, tan: np.ndarray) -> np.ndarray:
             accepted = np.zeros(active.size, dtype=bool)
             new_h, new_y, new_g = h0.copy(), y0.copy(), g0.copy()
             pending = np.flatnonzero(np.isfinite(step))
-            for _ in range(MAX_STEP_HALVINGS):
+            for _ in range(halvings):
                 if pending.size == 0:
                     break
                 trial = h0[pending] + lam[pending] * step[pending]
-                y1, g1 = problem.value_and_slope(trial, tan[active[pending]])
+                y1, g1 = problem.value_and_slope(trial, field[active[pending]])
                 good = (np.isfinite(y1) & (g1 * branch > 0)
                         & ((np.abs(y1) < np.abs(y0[pending]))
                            | (np.abs(y1) <= tolerance[active[pending]])))
@@ -579,8 +620,61 @@ def _aim(problem: _ChiefRayProblem, tan: np.ndarray) -> np.ndarray:
     return result
 
 
+def _aim_continued(problem: _ChiefRayProblem, field: np.ndarray) -> np.ndarray:
+    """
+    Return the aiming offsets of the chief rays, continuing the solution out along the field.
+
+    Wide-angle lenses move their real entrance pupil far from the paraxial one, so a paraxial
+    start fails at large angles. After :func:`_aim` from the paraxial starts, the first failed
+    samples (in order of |field|, one side at a time) are aimed again from the linear
+    extrapolation of the two solved samples below them, a window at a time (doubling while
+    every ray of a window converges), until a sample fails from an extrapolated start too: the
+    branch of chief rays that starts on the axis ends there.
+    """
+    height = _aim(problem, field)
+    for sign in (1.0, -1.0):
+        side = np.flatnonzero((field * sign > 0) & np.isfinite(field))
+        order = side[np.argsort(np.abs(field[side]), kind='stable')]
+        window = 8
+        for _ in range(CONTINUATION_PASSES):
+            solved = np.isfinite(height[order])
+            first = int(np.argmin(solved)) if not solved.all() else order.size
+            if first == order.size:
+                break
+            # Two solved samples below the frontier (the axis ray h = 0 at field 0 counts).
+            below = order[:first]
+            f0, h0 = (0.0, 0.0) if below.size < 2 else (field[below[-2]], height[below[-2]])
+            f1, h1 = (0.0, 0.0) if below.size < 1 else (field[below[-1]], height[below[-1]])
+            todo = order[first:first + window]
+            todo = todo[~np.isfinite(height[todo])]
+            if f1 == f0:
+                start = problem.paraxial_height(field[todo])
+            else:
+                start = h1 + (h1 - h0) / (f1 - f0) * (field[todo] - f1)
+            result = _aim(problem, field[todo], start, CONTINUATION_ITERATIONS,
+                          CONTINUATION_HALVINGS)
+            if not np.isfinite(result[0]):
+                break      # the frontier sample fails from a good start: the field ends
+            height[todo] = result
+            window = window * 2 if np.isfinite(result).all() else max(4, window // 2)
+    return height
+
+
+def _field_variable(problem: _ChiefRayProblem, tan: np.ndarray | None,
+                    theta: np.ndarray | None) -> np.ndarray:
+    """Return the problem's field variable from tan(theta) or theta (exactly one given)."""
+    if theta is None:
+        return np.arctan(tan) if problem.infinite else tan
+    if problem.infinite:
+        return theta
+    with np.errstate(**_ERRSTATE):
+        # A finite object plane ends at 90 deg (its height l tan(theta) is infinite there).
+        return np.where(np.abs(theta) < 0.5 * math.pi, np.tan(theta), np.nan)
+
+
 def aim_chief_rays(prescription: Prescription, object_distance_mm: float,
-                   tan_field: np.ndarray, *, aim: bool | None = None) -> Rays:
+                   tan_field: np.ndarray | None = None, *, aim: bool | None = None,
+                   field_angle_rad: np.ndarray | None = None) -> Rays:
     """
     Return the object-space chief rays of the given field points.
 
@@ -590,21 +684,28 @@ def aim_chief_rays(prescription: Prescription, object_distance_mm: float,
     :param aim: None to aim only when the stop is behind the first vertex, True to force the
         aiming path (a stop in object space then converges in one Newton step), False to use
         the line through the stop centre (only valid for a stop in object space).
-    :return: flat rays in object space, starting on the plane z = 0 when aimed, at the stop
+    :param field_angle_rad: instead of ``tan_field``, the field angle theta itself (rad), which
+        may pass 90 deg for a scene at infinity (a finite scene plane ends before 90 deg:
+        NaN there).
+    :return: flat rays in object space, starting near the first vertex when aimed, at the stop
         centre otherwise; NaN where aiming failed.
     :raises ValueError: for a scene distance <= 0 or an object behind the first vertex, an
         afocal lens (finite l) or an undefined paraxial entrance pupil.
     """
-    tan = np.asarray(tan_field, dtype=float).ravel()
+    if (tan_field is None) == (field_angle_rad is None):
+        raise ValueError('give exactly one of tan_field and field_angle_rad')
     problem = _ChiefRayProblem(prescription, object_distance_mm)
+    field = _field_variable(
+        problem, None if tan_field is None else np.asarray(tan_field, dtype=float).ravel(),
+        None if field_angle_rad is None else np.asarray(field_angle_rad, dtype=float).ravel())
     if aim is None:
         aim = problem.n_before_stop > 0
     if not aim:
         if problem.n_before_stop > 0:
             raise ValueError('the aperture stop is behind the first vertex: the chief ray '
                              'must be aimed')
-        return problem.through_stop_centre(tan)
-    return problem.object_rays(_aim(problem, tan), tan)
+        return problem.through_stop_centre(field)
+    return problem.object_rays(_aim_continued(problem, field), field)
 
 
 def trace_chief_rays(prescription: Prescription, object_distance_mm: float, sensor_z_mm: float,
@@ -628,6 +729,30 @@ def trace_chief_rays(prescription: Prescription, object_distance_mm: float, sens
     rays = aim_chief_rays(prescription, object_distance_mm, tan, aim=aim)
     image = transfer_to_plane(trace_surfaces(prescription, rays), float(sensor_z_mm))
     return image.y.reshape(tan.shape)
+
+
+def trace_field_angles(prescription: Prescription, object_distance_mm: float,
+                       sensor_z_mm: float, field_angle_rad: np.ndarray, *,
+                       aim: bool | None = None) -> np.ndarray:
+    """
+    Return the real image heights of chief rays given by their field angle theta.
+
+    As :func:`trace_chief_rays`, with the field parametrised by the angle itself, so a scene at
+    infinity can be traced to and beyond 90 deg (a fisheye); for a finite distance theta is
+    the angle seen from H, tan(theta) = Y / l, and theta >= 90 deg gives NaN.
+
+    :param prescription: the lens.
+    :param object_distance_mm: l from H (``math.inf`` allowed).
+    :param sensor_z_mm: z of the sensor plane.
+    :param field_angle_rad: theta in rad, any shape.
+    :param aim: see :func:`aim_chief_rays`.
+    :return: signed heights in mm, same shape (NaN where the trace fails).
+    :raises ValueError: as :func:`aim_chief_rays`.
+    """
+    theta = np.asarray(field_angle_rad, dtype=float)
+    rays = aim_chief_rays(prescription, object_distance_mm, aim=aim, field_angle_rad=theta)
+    image = transfer_to_plane(trace_surfaces(prescription, rays), float(sensor_z_mm))
+    return image.y.reshape(theta.shape)
 
 
 def radial_map(prescription: Prescription, object_distance_mm: float, sensor_z_mm: float,

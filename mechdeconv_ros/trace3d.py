@@ -13,19 +13,8 @@ point (x, y, z) and a unit direction (k_x, k_y, k_z) with k_z > 0.
 
 Surfaces
 --------
-In coordinates local to a vertex (z' = z - z_v) a spherical surface is
-c (x^2 + y^2 + z'^2) - 2 z' = 0 (c = 1/radius, 0 = flat). A ray p + s k meets it after
-
-    s = C / (B + sqrt(B^2 - c C)),   B = k_z - c (p . k),   C = c |p|^2 - 2 z'
-
-(the cancellation-free root on the vertex side), where the unit normal is
-N = (-c x, -c y, 1 - c z'), N_z > 0 on the vertex hemisphere. Refraction from index n to n'
-(vector Snell law, mu = n / n', cos_i = k . N):
-
-    cos_t = sqrt(1 - mu^2 (1 - cos_i^2)),   k' = mu k + (cos_t - mu cos_i) N.
-
-:func:`intersect` and :func:`refract` are the only surface-specific code; aspheric surfaces
-plug in there.
+Spheres, conics and even aspheres: the exact intersection and the vector Snell law of
+:mod:`mechdeconv_ros.surfaces` (``intersect`` / ``refract``), in vertex-local coordinates.
 
 Apertures
 ---------
@@ -51,57 +40,13 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 from mechdeconv_ros.raytrace import Prescription, Surface, vertex_z
+from mechdeconv_ros.surfaces import intersect, refract
 import numpy as np
 
 #: A ray that must travel backwards by more than this to reach a later surface fails.
 BACKWARD_TOLERANCE_MM = 1e-9
 
 _ERRSTATE = {'invalid': 'ignore', 'divide': 'ignore', 'over': 'ignore'}
-
-
-def intersect(surface: Surface, x: np.ndarray, y: np.ndarray, z: np.ndarray,
-              kx: np.ndarray, ky: np.ndarray, kz: np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """
-    Intersect rays with one surface in its vertex-local frame.
-
-    :param surface: the surface (its vertex at z = 0 of this frame).
-    :param x: ray points, mm (``z`` vertex-local).
-    :param y: see ``x``.
-    :param z: see ``x``.
-    :param kx: unit ray directions.
-    :param ky: see ``kx``.
-    :param kz: see ``kx``.
-    :return: ``(s, nx, ny, nz, bad)``: the path length to the surface, the unit normal there
-        (``nz > 0``) and the rays that miss it or meet it outside the sag's domain.
-    """
-    c = surface.curvature_per_mm
-    with np.errstate(**_ERRSTATE):
-        b = kz - c * (x * kx + y * ky + z * kz)
-        cc = c * (x * x + y * y + z * z) - 2.0 * z
-        s = cc / (b + np.sqrt(b * b - c * cc))
-        px = x + s * kx
-        py = y + s * ky
-        pz = z + s * kz
-        nz = 1.0 - c * pz
-        bad = ~np.isfinite(s) | ~(nz > 0)
-    return s, -c * px, -c * py, nz, bad
-
-
-def refract(kx: np.ndarray, ky: np.ndarray, kz: np.ndarray, nx: np.ndarray, ny: np.ndarray,
-            nz: np.ndarray, n_before: float, n_after: float
-            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """
-    Refract unit directions at unit normals (vector Snell law).
-
-    :return: the refracted unit directions; NaN where the ray is totally internally reflected.
-    """
-    mu = n_before / n_after
-    with np.errstate(**_ERRSTATE):
-        cos_i = kx * nx + ky * ny + kz * nz
-        cos_t = np.sqrt(1.0 - mu * mu * (1.0 - cos_i * cos_i))
-        g = cos_t - mu * cos_i
-        return mu * kx + g * nx, mu * ky + g * ny, mu * kz + g * nz
 
 
 class Element(NamedTuple):

@@ -85,9 +85,15 @@ def test_3d_trace_matches_the_meridional_trace():
     assert not np.any(ok & ~free)
 
 
-def test_reversed_trace_retraces_a_skew_ray():
+@pytest.mark.parametrize('aspheric', [False, True], ids=['spherical', 'aspheric'])
+def test_reversed_trace_retraces_a_skew_ray(aspheric):
     values = load_params_file(CONFIG / 'cooke_triplet.yaml')
+    if aspheric:
+        values['lens.surfaces.conic'] = [-0.6, 0.0, 0.0, 0.0, 0.0, 1.5]
+        values['lens.surfaces.asphere_a4'] = [2e-5, 0.0, 0.0, 0.0, 0.0, -3e-5]
+        values['lens.surfaces.asphere_a6'] = [1e-7, 0.0, 0.0, 0.0, 0.0, 0.0]
     lens = build_model(values).prescription
+    assert any(any(s.asphere) or s.conic for s in lens.surfaces) == aspheric
     system = trace3d.lens_system(lens, 0.0, None).without_semi_diameters()
     ok, (x, y, z, kx, ky, kz) = trace3d.trace_pass(system, 1.5, -2.0, 0.0, 0.05, 0.1,
                                                    math.sqrt(1 - 0.05 ** 2 - 0.1 ** 2))
