@@ -73,6 +73,8 @@ SCAN_SAMPLES = 128
 ROWS = 24
 ROOT_STEPS = 6
 EDGE_TOLERANCE = 1e-7
+#: Second differences of RI above this (x the on-axis value) get their intervals halved.
+KINK_THRESHOLD = 1e-3
 #: Multiples of the meridional half-width probed to bracket each row's half-width.
 PROBE_FACTORS = (0.8, 1.25, 1.6, 2.5, 4.0, 8.0)
 
@@ -82,7 +84,8 @@ class Illumination:
     """
     The traced relative illumination over the real sensor radius.
 
-    ``height_mm`` is uniform from 0; ``ri`` is 1 on the axis; ``pupil_pass_fraction`` is
+    ``height_mm`` increases from 0 (uniform, with midpoints added where a rim starts to
+    clip); ``ri`` is 1 on the axis; ``pupil_pass_fraction`` is
     None when it was not asked for. ``corner_height_mm`` is the real radius of the raw image's
     corner pixel centre, ``corner_ri`` the RI there.
     """
@@ -300,6 +303,18 @@ def relative_illumination(model: Any, *, samples: int = RI_SAMPLES,
     if not area[0] > 0:
         raise ValueError('no ray from the scene reaches the centre of the sensor: the stop '
                          'or a semi-diameter blocks the axial beam')
+    # Where a rim starts to clip, RI(h) has a kink that linear interpolation cuts: trace the
+    # midpoints of the intervals next to a large second difference (once).
+    bend = np.abs(area[:-2] - 2.0 * area[1:-1] + area[2:]) > KINK_THRESHOLD * area[0]
+    near = np.zeros(samples - 1, dtype=bool)
+    near[:-1] |= bend
+    near[1:] |= bend
+    if near.any():
+        extra = 0.5 * (heights[:-1] + heights[1:])[near]
+        heights = np.concatenate((heights, extra))
+        area = np.concatenate((area, beam_area(system, extra)))
+        order = np.argsort(heights)
+        heights, area = heights[order], area[order]
     ri = area / area[0]
     fraction = None
     if with_fraction:
@@ -487,3 +502,60 @@ def lensfun_fit(model: Any, illumination: Illumination | None = None,
     return LensfunFit(float(k[0]), float(k[1]), float(k[2]), error,
                       float(model.focal_length_mm), float(summary['f_number']),
                       distance / 1000.0 if distance > 0 else LENSFUN_INFINITY_M)
+
+
+def stop_flux(prescription: Prescription, stop_radius_mm: float, stop_surface: int | None,
+              object_distance_mm: float, sensor_radius_mm: float, *, bins: int = 8,
+              rays: int = 2_000_000, stop_cosine: float, chunk: int = 250_000,
+              seed: int = 0) -> tuple[FloatArray, FloatArray]:
+    """
+    Count the flux through the stop onto the sensor, ray by ray (reference for wide fields).
+
+    Rays are spread uniformly (a randomly shifted R_4 sequence) over the stop's vertex plane
+    (a disk 1.25 x the stop radius) and over the direction cosines of the medium there
+    (|k| <= ``stop_cosine``): every ray carries the same etendue n^2 dA dk_x dk_y, conserved
+    to the sensor. Each ray is traced forwards from the stop to the sensor plane and backwards
+    through the lens in front of the stop into the scene; it counts when it clears every
+    aperture both ways. Binned as :func:`forward_flux`, whose sampling over the scene wastes
+    most rays on a wide-angle lens whose entrance pupil wanders across the front element.
+
+    :param prescription: the lens.
+    :param stop_radius_mm: clear radius of the stop.
+    :param stop_surface: surface carrying the stop, None for the stop plane.
+    :param object_distance_mm: l (only the sensor position depends on it).
+    :param sensor_radius_mm: outer radius of the last annulus.
+    :param bins: number of annuli of equal area.
+    :param rays: number of rays.
+    :param stop_cosine: the largest direction cosine at the stop (choose it generously).
+    :param chunk: rays per batch.
+    :param seed: shift of the sequence.
+    :return: ``(edges_mm, irradiance)`` as :func:`forward_flux` (E / L, projected sr).
+    """
+    rng = np.random.default_rng(seed)
+    system = lens_system(prescription, stop_radius_mm, stop_surface)
+    sensor_z, _ = image_plane(prescription, object_distance_mm)
+    j = next(i for i, e in enumerate(system.elements) if e.is_stop)
+    stop = system.elements[j]
+    front = reversed_system(System(system.elements[:j]), stop.z_mm)
+    rear = System(system.elements[j if stop.surface is not None else j + 1:])
+    n = stop.n_before
+    sample_radius = 1.25 * stop_radius_mm
+    flux = np.zeros(bins)
+    points = _r2_sequence(rays, 4, rng)
+    for start in range(0, rays, chunk):
+        u = points[start:start + chunk]
+        x, y = _disk(u[:, 0], u[:, 1], sample_radius)
+        kx, ky = _disk(u[:, 2], u[:, 3], stop_cosine)
+        kz = np.sqrt(1.0 - kx * kx - ky * ky)
+        ok = x * x + y * y <= stop_radius_mm ** 2 if stop.surface is None else True
+        back, _ = trace_pass(front, x, y, 0.0, -kx, -ky, kz)
+        ahead, (ex, ey, ez, ekx, eky, ekz) = trace_pass(rear, x, y, stop.z_mm, kx, ky, kz)
+        ok = ok & back & ahead
+        s = (sensor_z - ez[ok]) / ekz[ok]
+        r2 = (ex[ok] + s * ekx[ok]) ** 2 + (ey[ok] + s * eky[ok]) ** 2
+        index = np.floor(bins * r2 / sensor_radius_mm ** 2).astype(np.int64)
+        flux += np.bincount(index[index < bins], minlength=bins)
+    edges = sensor_radius_mm * np.sqrt(np.arange(bins + 1) / bins)
+    measure = n * n * math.pi * sample_radius ** 2 * math.pi * stop_cosine ** 2 / rays
+    area = math.pi * sensor_radius_mm ** 2 / bins
+    return edges, flux * measure / area

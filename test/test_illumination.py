@@ -144,3 +144,51 @@ def test_forward_flux_agrees_on_a_clipped_triplet():
     assert_allclose(counted, traced, atol=0.005)
     assert curve.pupil_pass_fraction[-1] < 0.9
     assert curve.corner_ri < 0.8
+
+
+#: A retrofocus wide-angle lens (f = 10.9 mm, 85 deg diagonal on 16 x 12 mm) whose front
+#: element's rim clips the corner beams: a negative meniscus, a positive doublet-like pair,
+#: the stop on a flat dummy surface, a positive rear element. Designed for this test.
+WIDE = {
+    'lens.surfaces.radius_mm': [40.0, 11.0, 30.0, -60.0, 0.0, 40.0, -14.0],
+    'lens.surfaces.thickness_mm': [2.0, 14.0, 5.0, 4.0, 4.0, 5.0, 0.0],
+    'lens.surfaces.refractive_index': [1.6, 1.0, 1.7, 1.0, 1.0, 1.6, 1.0],
+    'lens.surfaces.semi_diameter_mm': [18.0, 9.5, 7.0, 6.0, 0.0, 6.0, 7.0],
+    'lens.stop_surface': 4, 'lens.aperture_diameter_mm': 6.0, 'scene.distance_mm': 0.0,
+    'sensor.width_px': 1600, 'sensor.height_px': 1200,
+    'sensor.pixel_size_x_um': 10.0, 'sensor.pixel_size_y_um': 10.0,
+}
+
+
+def _stop_reference(values, stop_cosine, rays=1_500_000, bins=8):
+    model = build_model(values)
+    curve = il.relative_illumination(model)
+    radius, surface = il.stop_of(model.values)
+    distance = float(model.values['scene.distance_mm']) or math.inf
+    sensor_z, _ = rt.image_plane(model.prescription, distance)
+    on_axis = il.beam_area(il.backward_system(model.prescription, radius, surface, sensor_z),
+                           np.zeros(1))[0]
+    edges, irradiance = il.stop_flux(model.prescription, radius, surface, distance,
+                                     curve.corner_height_mm, bins=bins, rays=rays,
+                                     stop_cosine=stop_cosine)
+    return curve, il.annulus_means(curve.height_mm, curve.ri, edges), irradiance / on_axis
+
+
+def test_stop_flux_agrees_on_a_clipped_wide_angle_lens():
+    curve, traced, counted = _stop_reference(WIDE, 0.75)
+    assert_allclose(counted, traced, atol=0.005)
+    assert curve.corner_ri < 0.65
+    assert np.interp(curve.corner_height_mm, curve.height_mm, curve.pupil_pass_fraction) < 0.8
+
+
+def test_stop_flux_agrees_with_the_forward_count_on_case2():
+    values = load_params_file(CONFIG / 'case2.yaml')
+    _, traced, counted = _stop_reference(values, 0.5)
+    assert_allclose(counted, traced, atol=0.005)
+
+
+@pytest.mark.skipif(not (CONFIG / 'fisheye.yaml').exists(), reason='no config/fisheye.yaml')
+def test_stop_flux_agrees_on_the_fisheye():
+    values = load_params_file(CONFIG / 'fisheye.yaml')
+    _, traced, counted = _stop_reference(values, 0.95)
+    assert_allclose(counted, traced, atol=0.005)
