@@ -1,16 +1,19 @@
 # Copyright 2026 The mechdeconv_ros Authors.
 # SPDX-License-Identifier: Apache-2.0
 """
-Shared helpers of the benchmarks: machine facts, load monitoring, interleaved timing, output.
+Shared helpers of the benchmarks: load monitoring, interleaved timing, the command line.
 
-Timing method (shared/reference/perf-anchors.md): the variants of one comparison run in
-*rounds*. Variants are grouped by their OpenCV thread count and an optional group name; in
-every round each group runs in turn (``cv2.setNumThreads`` once per group), each of its
-variants is called once to warm up, and then the group's variants are called in turn, one call
-each, ``reps`` times over, so a burst of load from another process hits all of them alike
-(call-level interleaving). The order of the groups and of the variants in a group rotates
-from round to round. Before each round the machine is given up to ``quiet_wait_s`` to become
-quiet, and how many cores *other* processes used during the round is recorded
+(Tables, figures, JSON and machine facts: :mod:`benchmarks.report`.)
+
+Timing method: on a shared machine the load of other processes comes in bursts of seconds,
+so timing one variant after another would compare different loads. The variants of one
+comparison run in *rounds*. Variants are grouped by their OpenCV thread count and an optional
+group name; in every round each group runs in turn (``cv2.setNumThreads`` once per group),
+each of its variants is called once to warm up, and then the group's variants are called in
+turn, one call each, ``reps`` times over, so a burst of load from another process hits all of
+them alike (call-level interleaving). The order of the groups and of the variants in a group
+rotates from round to round. Before each round the machine is given up to ``quiet_wait_s`` to
+become quiet, and how many cores *other* processes used during the round is recorded
 (``others_cores``: busy time of the whole machine from ``/proc/stat`` minus this process's own
 CPU time, over the wall time). A variant is summarised by its ``min`` over every call and the
 ``median`` of its per-round medians.
@@ -19,17 +22,13 @@ CPU time, over the wall time). A variant is summarised by its ``min`` over every
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-import datetime
-import json
 import math
 import os
 from pathlib import Path
-import platform
 import statistics
-import subprocess
 import sys
 import time
-from typing import Any, Callable, Iterable, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 REPO = Path(__file__).resolve().parents[1]
 RESULTS = REPO / 'results'
@@ -37,74 +36,6 @@ RESULTS = REPO / 'results'
 RAW = RESULTS / 'raw'
 
 _TICK = os.sysconf('SC_CLK_TCK')
-
-
-# ---------------------------------------------------------------------------------------------
-# Machine facts
-# ---------------------------------------------------------------------------------------------
-
-def _lscpu_model() -> str:
-    try:
-        out = subprocess.run(['lscpu'], capture_output=True, text=True, timeout=10).stdout
-    except (OSError, subprocess.SubprocessError):
-        out = ''
-    for line in out.splitlines():
-        if line.startswith('Model name:'):
-            return line.split(':', 1)[1].strip()
-    return platform.processor() or 'unknown'
-
-
-def _version(module: str) -> str | None:
-    try:
-        imported = __import__(module)
-    except ImportError:
-        return None
-    return str(getattr(imported, '__version__', 'unknown'))
-
-
-def _git_commit() -> str | None:
-    try:
-        out = subprocess.run(['git', '-C', str(REPO), 'rev-parse', 'HEAD'], capture_output=True,
-                             text=True, timeout=10)
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return out.stdout.strip() or None
-
-
-def machine_info() -> dict[str, Any]:
-    """
-    Return the facts that every results JSON carries.
-
-    :return: CPU model (lscpu), core count, memory, load, OS, Python/numpy/OpenCV versions.
-    """
-    import cv2
-    import numpy as np
-    try:
-        with open('/proc/meminfo', encoding='ascii') as stream:
-            mem_kib = int(stream.readline().split()[1])
-    except (OSError, ValueError, IndexError):
-        mem_kib = 0
-    return {
-        'cpu_model': _lscpu_model(),
-        'nproc': os.cpu_count(),
-        'memory_gib': round(mem_kib / 2 ** 20, 1),
-        'loadavg_1_5_15': list(os.getloadavg()),
-        'platform': platform.platform(),
-        'python': platform.python_version(),
-        'numpy': np.__version__,
-        'opencv': cv2.__version__,
-        'opencv_default_threads': cv2.getNumThreads(),
-        'lensfunpy': _version('lensfunpy'),
-        'git_commit': _git_commit(),
-        'date_utc': datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%dT%H:%M:%SZ'),
-        'executable': sys.executable,
-    }
-
-
-def machine_line(info: Mapping[str, Any]) -> str:
-    """Return a one-line description of the machine for the tables."""
-    return (f"{info['cpu_model']}, {info['nproc']} vCPUs, {info['memory_gib']} GiB; "
-            f"Python {info['python']}, numpy {info['numpy']}, OpenCV {info['opencv']}")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -292,55 +223,8 @@ def interleave(variants: Sequence[Variant], rounds: int, reps: int | Mapping[str
 
 
 # ---------------------------------------------------------------------------------------------
-# Output
+# Command line
 # ---------------------------------------------------------------------------------------------
-
-def _clean(value: Any) -> Any:
-    """Make a value JSON-ready: NaN/inf -> None, numpy scalars -> Python."""
-    if isinstance(value, dict):
-        return {str(k): _clean(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_clean(v) for v in value]
-    if hasattr(value, 'tolist') and not isinstance(value, (str, bytes)):
-        return _clean(value.tolist())
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
-
-
-def write_json(path: Path, doc: Mapping[str, Any]) -> Path:
-    """Write ``doc`` (NaN -> null) as indented JSON; create the folder."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(_clean(doc), indent=1) + '\n')
-    return path
-
-
-def fmt_ms(value: float | None) -> str:
-    """Format a time in ms with 3 significant digits (``-`` when missing)."""
-    if value is None or not math.isfinite(value):
-        return '-'
-    if value >= 100:
-        return f'{value:.0f}'
-    if value >= 10:
-        return f'{value:.1f}'
-    if value >= 1:
-        return f'{value:.2f}'
-    return f'{value:.3f}'
-
-
-def fmt_ratio(value: float | None) -> str:
-    """Format a ratio (``x``) with 2 decimals."""
-    if value is None or not math.isfinite(value):
-        return '-'
-    return f'{value:.2f}'
-
-
-def markdown_table(header: Sequence[str], rows: Iterable[Sequence[Any]]) -> list[str]:
-    """Return the lines of a GitHub markdown table."""
-    lines = ['| ' + ' | '.join(header) + ' |', '|' + '---|' * len(header)]
-    lines += ['| ' + ' | '.join(str(c) for c in row) + ' |' for row in rows]
-    return lines
-
 
 def log(message: str) -> None:
     """Print a progress line to stderr."""
@@ -368,22 +252,3 @@ def bench_main(description: str, run: Callable[..., dict[str, Any]],
     doc = run(args.out, quick=args.quick)
     print('\n'.join(tables(doc)))
     return 0
-
-
-def save_figure(fig: Any, out_dir: Path, filename: str, dpi: int = 100) -> str:
-    """
-    Lay out, write and close a matplotlib figure in the results folder.
-
-    :param fig: the figure.
-    :param out_dir: the results folder.
-    :param filename: the PNG's name (may include a subfolder).
-    :param dpi: resolution.
-    :return: the path relative to the results folder's parent, as the README links it.
-    """
-    import matplotlib.pyplot as plt
-    fig.tight_layout()
-    path = out_dir / filename
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi)
-    plt.close(fig)
-    return str(path.relative_to(out_dir.parent))

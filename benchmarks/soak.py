@@ -7,7 +7,7 @@ The long run: correct_node at full rate for minutes, its memory sampled every se
 
 Three processes, with the environment of :func:`benchmarks.node_latency.ros_env` (the package's
 Fast DDS profile, the Makefile's ``MALLOC_*`` settings, discovery on localhost) and a private
-``ROS_DOMAIN_ID`` (220-232, apart from the tests' and the other benchmarks'):
+``ROS_DOMAIN_ID`` (the soak's range of :data:`mechdeconv_ros.graph_env.DOMAIN_RANGES`):
 
 * the publisher of :mod:`benchmarks.node_latency` (``--role publisher``): one 1280x720 rgb8
   frame, paced at 30 Hz, stamped with the wall clock;
@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 from pathlib import Path
 import statistics
 import sys
@@ -46,9 +45,10 @@ import tempfile
 import time
 from typing import Any, Sequence
 
-from benchmarks.common import LoadMonitor, log, machine_info, machine_line, RESULTS, write_json
-from benchmarks.node_latency import (
-    node_argv, Probe, Proc, publisher_argv, ros_env)
+from benchmarks.common import LoadMonitor, log, RESULTS
+from benchmarks.node_latency import node_argv, Probe, publisher_argv, ros_env, start_child
+from benchmarks.report import machine_info, soak_plot, soak_report, write_json
+from mechdeconv_ros.graph_env import Child, configure_this_process, pick_domain_id
 
 WIDTH, HEIGHT, RATE_HZ = 1280, 720, 30.0
 SET_EVERY_S = 30.0
@@ -58,11 +58,6 @@ FULL_RUN_MIN = 10.0
 READY_TIMEOUT_S = 20.0
 FLAT_MIN_MIB = 1.0
 FLAT_NOISE_SIGMAS = 3.0
-
-
-def _domain_id() -> int:
-    """Return a private ROS_DOMAIN_ID in 220-232 (tests use 1-100, node_latency 120-219)."""
-    return 220 + os.getpid() % 13
 
 
 def fit_line(t_min: Sequence[float], y: Sequence[float]) -> dict[str, float]:
@@ -205,13 +200,11 @@ def run(minutes: float, out_dir: Path, set_every_s: float = SET_EVERY_S,
     """
     import psutil
 
-    domain = _domain_id()
+    domain = pick_domain_id('soak')
     env = ros_env(domain, 'shm')
     # This process's own participant must use the same transport profile (read once, at the
     # first participant of the process).
-    for key in ('FASTRTPS_DEFAULT_PROFILES_FILE', 'ROS_AUTOMATIC_DISCOVERY_RANGE'):
-        os.environ[key] = env[key]
-    os.environ.pop('ROS_LOCALHOST_ONLY', None)
+    configure_this_process(env)
     tag = f'{minutes:g}min'
     log_dir = Path(tempfile.mkdtemp(prefix='mechdeconv_soak_'))
     doc: dict[str, Any] = {
@@ -221,18 +214,18 @@ def run(minutes: float, out_dir: Path, set_every_s: float = SET_EVERY_S,
         'env': {k: env.get(k) for k in ('FASTRTPS_DEFAULT_PROFILES_FILE',
                                         'MALLOC_MMAP_THRESHOLD_', 'MALLOC_TRIM_THRESHOLD_')},
         'samples': [], 'sets': [], 'exit_codes': {}, 'errors': []}
-    node = Proc(node_argv('node'), env, log_dir, 'correct_node')
+    node = start_child(node_argv('node'), env, log_dir, 'correct_node')
     probe = SoakProbe(domain)
-    pub: Proc | None = None
+    pub: Child | None = None
     try:
         ready_by = time.monotonic() + READY_TIMEOUT_S
         if not probe.spin_until_deadline(
                 lambda: probe.node.count_subscribers('/image_raw') > 0, ready_by):
-            raise RuntimeError(f'correct_node not ready: {node.stderr_tail()}')
-        pub = Proc(publisher_argv(width, height, rate_hz), env, log_dir, 'publisher')
+            raise RuntimeError(f'correct_node not ready: {node.tail()}')
+        pub = start_child(publisher_argv(width, height, rate_hz), env, log_dir, 'publisher')
         if not probe.spin_until_deadline(lambda: bool(probe.frames),
                                          time.monotonic() + READY_TIMEOUT_S):
-            raise RuntimeError(f'no frame: {node.stderr_tail()}')
+            raise RuntimeError(f'no frame: {node.tail()}')
         proc = psutil.Process(node.pid)
         monitor = LoadMonitor(lambda: time.process_time() + node.cpu_s() + pub.cpu_s())
         start = time.monotonic()
@@ -255,7 +248,7 @@ def run(minutes: float, out_dir: Path, set_every_s: float = SET_EVERY_S,
             if time.monotonic() < start + tick:
                 continue
             if not node.running():
-                doc['errors'].append(f'correct_node exited: {node.stderr_tail()}')
+                doc['errors'].append(f'correct_node exited: {node.tail()}')
                 break
             frames = probe.frames[seen:]
             seen = len(probe.frames)
@@ -295,15 +288,15 @@ def run(minutes: float, out_dir: Path, set_every_s: float = SET_EVERY_S,
                 code = proc_.stop()
                 doc['exit_codes'][name] = code
                 if code != 0 or proc_.killed:
-                    doc['errors'].append(f'{name} exited with {code}: {proc_.stderr_tail()}')
-        doc['node_stderr_tail'] = node.stderr_tail(5)
-        if 'Traceback' in node.err_path.read_text(errors='replace'):
+                    doc['errors'].append(f'{name} exited with {code}: {proc_.tail()}')
+        doc['node_stderr_tail'] = node.tail(5)
+        if 'Traceback' in node.stderr():
             doc['errors'].append('Traceback in the node log')
     summarize(doc)
     write_json(out_dir / f'soak_{tag}.json', doc)
     if doc['samples']:
         name = 'soak_rss.png' if minutes >= FULL_RUN_MIN else f'soak_rss_{tag}.png'
-        doc['figure'] = str(plot(doc, out_dir / name))
+        doc['figure'] = str(soak_plot(doc, out_dir / name))
     return doc
 
 
@@ -343,75 +336,6 @@ def summarize(doc: dict[str, Any]) -> None:
     doc['ok'] = bool(memory['flat'] and not doc['errors'])
 
 
-def plot(doc: dict[str, Any], path: Path) -> Path:
-    """Draw RSS (and output fps) over time with the second-half fit; return the path."""
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
-
-    samples = doc['samples']
-    t = [s['t_s'] / 60.0 for s in samples]
-    rss = [s['rss_mib'] for s in samples]
-    memory = doc['summary']['memory_second_half']
-    fig, ax = plt.subplots(figsize=(10, 5))
-    ax.plot(t, rss, color='tab:blue', linewidth=1.0, label='node RSS (1 s samples)')
-    lo, hi = memory['window_s']
-    fit_t = [lo / 60.0, hi / 60.0]
-    ax.plot(fit_t, [memory['intercept_mib'] + memory['slope_mib_per_min'] * x for x in fit_t],
-            color='tab:red', linewidth=2.0,
-            label=f"fit over the second half: {memory['slope_mib_per_min']:+.4f} MiB/min "
-                  f"(+/- {memory['slope_se_mib_per_min']:.4f})")
-    ax.axvspan(0, lo / 60.0, color='0.92', label='first half (warm-up)')
-    for entry in doc['sets']:
-        ax.axvline(entry['t_s'] / 60.0, color='0.6', linewidth=0.5, linestyle=':')
-    ax.set_xlabel('time [min]')
-    ax.set_ylabel('resident memory [MiB]')
-    span = max(rss) - min(rss)
-    ax.set_ylim(min(rss) - max(5.0, 0.2 * span), max(rss) + max(5.0, 0.2 * span))
-    ax2 = ax.twinx()
-    ax2.plot(t, [s['fps_out'] for s in samples], color='tab:green', linewidth=0.6, alpha=0.6)
-    ax2.set_ylabel('image_rect received [fps]', color='tab:green')
-    ax2.set_ylim(0, max(doc['rate_hz'] * 1.5, max(s['fps_out'] for s in samples) + 1))
-    ax.set_title(f"correct_node, {doc['width']}x{doc['height']} rgb8 at {doc['rate_hz']:g} Hz "
-                 f"for {doc['minutes']:g} min; stop offset set every {doc['set_every_s']:g} s "
-                 '(dotted)', fontsize=10)
-    ax.legend(loc='lower right', fontsize=8)
-    fig.text(0.01, 0.01, machine_line(doc['machine']), fontsize=7, color='0.4')
-    fig.tight_layout(rect=(0, 0.03, 1, 1))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
-
-
-def report(doc: dict[str, Any]) -> str:
-    """Return the human-readable summary of a run."""
-    if 'summary' not in doc:
-        return 'soak: no summary; errors: ' + '; '.join(doc['errors'])
-    s = doc['summary']
-    m = s['memory_second_half']
-    lines = [
-        f"soak: {s['seconds'] / 60:.1f} min of {doc['width']}x{doc['height']} rgb8 at "
-        f"{doc['rate_hz']:g} Hz: received {s['fps_out_mean']:.1f} fps mean "
-        f"(min {s['fps_out_min']} in a second), latency p50 {doc['latency_ms']['p50']:.1f} ms, "
-        f"p99 {doc['latency_ms']['p99']:.1f} ms; node {s['node_cores_mean']:.2f} cores; other "
-        f"processes {doc.get('others_cores', math.nan):.2f} cores",
-        f"RSS: {s['rss_mib']['first']:.1f} MiB at start, {s['rss_mib']['after_1_min']:.1f} after "
-        f"1 min, {s['rss_mib']['at_half']:.1f} at half, {s['rss_mib']['end']:.1f} at the end, "
-        f"max {s['rss_mib']['max']:.1f}",
-        f"second half: slope {m['slope_mib_per_min']:+.4f} MiB/min (SE "
-        f"{m['slope_se_mib_per_min']:.4f}), residual sd {m['residual_std_mib']:.3f} MiB, "
-        f"predicted growth {m['growth_over_window_mib']:+.2f} MiB over the half (allowed "
-        f"{m['allowed_growth_mib']:.2f}): {'FLAT' if m['flat'] else 'GROWING'}",
-        f"threads {s['threads']['min']}-{s['threads']['max']}, open descriptors "
-        f"{s['fds']['min']}-{s['fds']['max']}; parameter sets {s['sets']}, reaching the frames "
-        f"{s['sets_reaching_frames']}; exit codes {doc['exit_codes']}",
-    ]
-    if doc['errors']:
-        lines.append('errors: ' + '; '.join(doc['errors']))
-    return '\n'.join(lines)
-
-
 def main(argv: list[str] | None = None) -> int:
     """Run the soak from the command line; exit 0 when it held."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0].strip())
@@ -430,11 +354,11 @@ def main(argv: list[str] | None = None) -> int:
         doc = json.loads(args.replot.read_text())
         name = ('soak_rss.png' if doc['minutes'] >= FULL_RUN_MIN
                 else f"soak_rss_{doc['minutes']:g}min.png")
-        print(plot(doc, args.replot.parent / name))
-        print(report(doc))
+        print(soak_plot(doc, args.replot.parent / name))
+        print(soak_report(doc))
         return 0 if doc.get('ok') else 1
     doc = run(args.minutes, args.out, args.set_every, args.width, args.height, args.rate)
-    print(report(doc))
+    print(soak_report(doc))
     return 0 if doc.get('ok') else 1
 
 

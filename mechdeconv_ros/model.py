@@ -51,7 +51,8 @@ import yaml
 
 FloatArray = npt.NDArray[np.float64]
 
-#: Samples of the radial map (DESIGN: at least 1024 from 0 to past the output corner).
+#: Samples of the radial map (at least 1024 from 0 to past the output corner: docs/design.md
+#: section 2.5).
 CURVE_SAMPLES = 2048
 #: Plumb_bob fits worse than this (px RMS) switch to rational_polynomial.
 PLUMB_BOB_MAX_RMS_PX = 0.1

@@ -6,14 +6,30 @@ Pictures of a LensModel: distortion curve, displacement field, a grid before and
 Matplotlib with the Agg backend (no display needed). The grid is rendered in the ideal
 (corrected) image and pushed through the forward model to make what the camera would see, so
 the "after" panel shows the correction undoing the lens.
+
+The two image panels show a frame of ``W x H`` px in a panel of about 500 display px, i.e.
+scaled by ``s = min(panel_w / W, panel_h / H)`` (0.3 for a 1600x1200 sensor). A chart of
+1 or 2 px lines, shown at that scale by nearest-neighbour sampling, aliases: lines vanish,
+break into dashes and beat against the display grid. So the chart's lines are drawn
+``LINE_DISPLAY_PX / s`` image px wide (about ``LINE_DISPLAY_PX`` px once shown), and each panel
+is reduced to its display size with ``cv2.INTER_AREA`` (an area average, which low-passes
+before it samples) before matplotlib shows it nearly pixel for pixel.
 """
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
+from typing import Any
 
+import cv2
 from mechdeconv_ros.model import LensModel
 import numpy as np
+
+#: Width of the chart's lines once shown in a panel, display px.
+LINE_DISPLAY_PX = 2.0
+#: Resolution of the figure, dots per inch (display px per inch of the 12 x 9 in figure).
+DPI = 100
 
 
 def grid_image(width: int, height: int, cells_x: int = 20, cells_y: int = 18,
@@ -37,12 +53,44 @@ def grid_image(width: int, height: int, cells_x: int = 20, cells_y: int = 18,
     return image
 
 
-def plot_model(model: LensModel, path: Path) -> None:
+def display_scale(ax: Any, width: int, height: int) -> float:
     """
-    Write a four-panel PNG: curve, displacement field, raw grid, corrected grid.
+    Return the display px per image px of a ``width x height`` image shown in ``ax``.
+
+    With ``aspect='equal'`` matplotlib shrinks the axes box to the image's aspect, so the
+    scale is the smaller of the two ratios. Call it after the figure's layout is final.
+
+    :param ax: the matplotlib axes.
+    :param width: image width in px.
+    :param height: image height in px.
+    :return: the scale ``s`` (< 1 when the image is reduced).
+    """
+    box = ax.get_window_extent()
+    return min(box.width / width, box.height / height)
+
+
+def to_display(image: np.ndarray, scale: float) -> np.ndarray:
+    """
+    Reduce an image to the size it is shown at, by area averaging.
+
+    :param image: the image, ``(H, W)`` or ``(H, W, C)``.
+    :param scale: display px per image px (:func:`display_scale`); >= 1 leaves it as it is.
+    :return: the image at ``round(W s) x round(H s)`` px (at least 1 x 1).
+    """
+    if scale >= 1.0:
+        return image
+    height, width = image.shape[:2]
+    size = (max(1, round(width * scale)), max(1, round(height * scale)))
+    return cv2.resize(image, size, interpolation=cv2.INTER_AREA)
+
+
+def make_figure(model: LensModel) -> Any:
+    """
+    Draw the four panels: curve, displacement field, raw grid, corrected grid.
 
     :param model: the lens model.
-    :param path: the PNG to write.
+    :return: the matplotlib figure (Agg); the image panels are ``fig.axes[2:4]`` in the order
+        raw, corrected (``fig.axes`` also holds the twin axis and the colour bar after them).
     """
     import matplotlib
     matplotlib.use('Agg')
@@ -50,7 +98,7 @@ def plot_model(model: LensModel, path: Path) -> None:
 
     from mechdeconv_ros.remap import distort_image, Rectifier
 
-    fig, axes = plt.subplots(2, 2, figsize=(12, 9))
+    fig, axes = plt.subplots(2, 2, figsize=(12, 9), dpi=DPI)
     pitch = min(model.pixel_mm)
     ideal, real = model.curve.ideal_mm, model.curve.real_mm
     ax = axes[0, 0]
@@ -87,19 +135,46 @@ def plot_model(model: LensModel, path: Path) -> None:
     ax.set_aspect('equal')
     ax.set_title(f'raw -> ideal displacement (max {model.max_displacement_px:.2f} px)')
 
-    grid = grid_image(model.out_width, model.out_height)
-    raw = distort_image(model, grid)
-    corrected = Rectifier(model).correct(raw)
-    for ax, image, title in ((axes[1, 0], raw, 'what the camera sees (grid through the lens)'),
-                             (axes[1, 1], corrected, 'corrected')):
-        ax.imshow(image, cmap='gray', interpolation='nearest')
+    panels = ((axes[1, 0], 'what the camera sees (grid through the lens)'),
+              (axes[1, 1], 'corrected'))
+    for ax, title in panels:
         ax.set_title(title)
         ax.set_axis_off()
-    fig.suptitle(f'f = {model.focal_length_mm:.4g} mm, stop offset '
-                 f"{model.values['lens.stop_offset_mm']:g} mm, scene "
-                 f"{model.values['scene.distance_mm'] or 'inf'} mm, "
+    values = model.values
+    if values['lens.surfaces.radius_mm']:
+        stop = f"{len(values['lens.surfaces.radius_mm'])} surfaces, stop surface " \
+            f"{values['lens.stop_surface']}"
+    else:
+        stop = f"stop offset {values['lens.stop_offset_mm']:g} mm"
+    distance = values['scene.distance_mm']
+    scene = f'scene at {distance:g} mm' if distance else 'scene at infinity'
+    fig.suptitle(f'f = {model.focal_length_mm:.4g} mm, {stop}, {scene}, '
                  f'{model.width}x{model.height} px')
+    # The layout first: the panels' size in display px sets how wide the chart's lines are.
     fig.tight_layout()
+    scale = min(display_scale(axes[1, 0], model.width, model.height),
+                display_scale(axes[1, 1], model.out_width, model.out_height))
+    line_px = max(2, math.ceil(LINE_DISPLAY_PX / min(scale, 1.0)))
+    grid = grid_image(model.out_width, model.out_height, line_px=line_px)
+    raw = distort_image(model, grid)
+    corrected = Rectifier(model).correct(raw)
+    for (ax, _), image in zip(panels, (raw, corrected)):
+        ax.imshow(to_display(image, scale), cmap='gray', vmin=0, vmax=255,
+                  interpolation='bilinear', extent=(-0.5, image.shape[1] - 0.5,
+                                                    image.shape[0] - 0.5, -0.5))
+    return fig
+
+
+def plot_model(model: LensModel, path: Path) -> None:
+    """
+    Write a four-panel PNG: curve, displacement field, raw grid, corrected grid.
+
+    :param model: the lens model.
+    :param path: the PNG to write.
+    """
+    import matplotlib.pyplot as plt
+
+    fig = make_figure(model)
     Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
+    fig.savefig(path, dpi=DPI)
     plt.close(fig)

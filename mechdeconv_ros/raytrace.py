@@ -3,7 +3,7 @@
 """
 Exact meridional ray tracing of rotationally symmetric lenses, and their paraxial data.
 
-Pure numpy, no ROS. This is how mechdeconv_ros computes distortion (DESIGN.md section 2,
+Pure numpy, no ROS. This is how mechdeconv_ros computes distortion (docs/design.md section 2.4,
 "trace the chief ray"): the real chief ray from each object point is found by ray aiming and
 refracted exactly by Snell's law at every surface (sphere, conic or even asphere: the
 geometry is in :mod:`mechdeconv_ros.surfaces`); where it crosses the sensor is the real image

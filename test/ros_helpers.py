@@ -4,12 +4,15 @@
 Helpers for the tests that run real ROS 2 processes (no mocks).
 
 * :func:`next_domain_id` gives every node launch of a test run its own ``ROS_DOMAIN_ID``
-  (derived from the pid, so parallel runs on one machine do not see each other), and
-  :func:`ros_env` the environment for it: discovery limited to localhost and the package's
-  Fast DDS profile (big shared-memory segment: large best-effort frames arrive).
-* :class:`NodeProcess` starts a node in its own process group and stops it with SIGINT to its
-  PID, returning the exit code; its context manager kills the group if anything goes wrong,
-  so no process outlives a test.
+  (the tests' range of :data:`mechdeconv_ros.graph_env.DOMAIN_RANGES`, pid-derived, so
+  parallel runs on one machine do not see each other), and :func:`ros_env` the environment
+  for it (:func:`mechdeconv_ros.graph_env.graph_env`: discovery limited to localhost and the
+  package's Fast DDS profile, whose big shared-memory segment lets large best-effort frames
+  arrive).
+* :class:`NodeProcess` is :class:`mechdeconv_ros.graph_env.Child` with ``<name>.out`` and
+  ``<name>.err`` logs: a node in its own process group, stopped with SIGINT to the group
+  (escalating to SIGTERM, SIGKILL), returning the exit code; its context manager kills the
+  group if anything goes wrong, so no process outlives a test.
 * :class:`RosClient` is a client node in the test process, in its own rclpy Context on the
   same domain: it publishes frames, collects the node's outputs by stamp and calls the
   parameter services exactly as ``ros2 param set`` does.
@@ -19,14 +22,14 @@ from __future__ import annotations
 
 import array
 import itertools
-import os
 from pathlib import Path
 import signal
-import subprocess
 import sys
 import time
 from typing import Any, Callable, Sequence
 
+from mechdeconv_ros import graph_env
+from mechdeconv_ros.graph_env import Child
 import numpy as np
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.srv import GetParameters, SetParameters, SetParametersAtomically
@@ -38,7 +41,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 REPO = Path(__file__).resolve().parents[1]
-FASTDDS_PROFILE = REPO / 'config' / 'fastdds_shm.xml'
+FASTDDS_PROFILE = graph_env.fastdds_profile()
 NODE_NAME = 'correct_node'
 
 #: Best effort, keep last: what the node publishes and subscribes with by default.
@@ -52,11 +55,9 @@ def next_domain_id() -> int:
     """
     Return a ROS_DOMAIN_ID for one node launch: distinct within this run, pid-derived.
 
-    Domains 1-100 are used (all valid for Fast DDS's port mapping with many participants).
-
-    :return: the domain id.
+    :return: the domain id, in the tests' range (1-100).
     """
-    return 1 + (os.getpid() * 7 + next(_domain_counter)) % 100
+    return graph_env.pick_domain_id('tests', next(_domain_counter))
 
 
 def ros_env(domain_id: int, extra: dict[str, str] | None = None) -> dict[str, str]:
@@ -65,22 +66,9 @@ def ros_env(domain_id: int, extra: dict[str, str] | None = None) -> dict[str, st
 
     :param domain_id: the ROS_DOMAIN_ID.
     :param extra: more variables (override the rest).
-    :return: a copy of ``os.environ`` with the ROS settings and the repo on PYTHONPATH.
+    :return: a copy of ``os.environ`` with the graph's settings and the repo on PYTHONPATH.
     """
-    env = dict(os.environ)
-    env.update({
-        'ROS_DOMAIN_ID': str(domain_id),
-        'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
-        'FASTRTPS_DEFAULT_PROFILES_FILE': str(FASTDDS_PROFILE),
-        'PYTHONUNBUFFERED': '1',
-        'RCUTILS_COLORIZED_OUTPUT': '0',
-        'RCUTILS_LOGGING_BUFFERED_STREAM': '0',
-        'PYTHONPATH': os.pathsep.join(
-            [str(REPO)] + [p for p in env.get('PYTHONPATH', '').split(os.pathsep) if p]),
-    })
-    env.pop('ROS_LOCALHOST_ONLY', None)
-    env.update(extra or {})
-    return env
+    return graph_env.graph_env(domain_id, extra=extra)
 
 
 def configure_test_process() -> None:
@@ -90,13 +78,11 @@ def configure_test_process() -> None:
     Fast DDS reads its profile file once per process, at the first participant, so this must
     run before any ``rclpy.init`` of the session.
     """
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    os.environ['FASTRTPS_DEFAULT_PROFILES_FILE'] = str(FASTDDS_PROFILE)
-    os.environ.pop('ROS_LOCALHOST_ONLY', None)
+    graph_env.configure_this_process(graph_env.graph_env(0))
 
 
-class NodeProcess:
-    """A ROS node process in its own process group, stopped by SIGINT to its PID."""
+class NodeProcess(Child):
+    """A ROS node process in its own process group, stopped by SIGINT to the group."""
 
     def __init__(self, argv: Sequence[str], env: dict[str, str], log_dir: Path,
                  name: str = 'node') -> None:
@@ -108,73 +94,18 @@ class NodeProcess:
         :param log_dir: where ``<name>.out`` and ``<name>.err`` go.
         :param name: file name stem of the logs.
         """
-        self.argv = list(argv)
-        self.out_path = log_dir / f'{name}.out'
-        self.err_path = log_dir / f'{name}.err'
-        self._out = open(self.out_path, 'wb')
-        self._err = open(self.err_path, 'wb')
-        self.proc = subprocess.Popen(self.argv, env=env, stdout=self._out, stderr=self._err,
-                                     stdin=subprocess.DEVNULL, start_new_session=True)
-        self.returncode: int | None = None
+        super().__init__(argv, env, log_dir / f'{name}.out', log_dir / f'{name}.err', name)
 
-    @property
-    def pid(self) -> int:
-        """Return the process id (also its process group id)."""
-        return self.proc.pid
-
-    def running(self) -> bool:
-        """Return True while the process runs."""
-        return self.proc.poll() is None
-
-    def stop(self, sig: int = signal.SIGINT, timeout: float = 15.0) -> int:
+    def stop(self, sig: int = signal.SIGINT, timeout: float = 15.0, **kwargs: Any) -> int:
         """
-        Send ``sig`` to the PID and wait for the exit; kill the group after ``timeout``.
+        Send ``sig`` to the group and wait for the exit; escalate after ``timeout``.
 
         :param sig: the signal (SIGINT, as Ctrl-C in ``ros2 run``).
         :param timeout: seconds to wait.
+        :param kwargs: see :meth:`mechdeconv_ros.graph_env.Child.stop`.
         :return: the exit code (negative: killed by a signal).
         """
-        if self.proc.poll() is None:
-            os.kill(self.proc.pid, sig)
-            try:
-                self.proc.wait(timeout=timeout)
-            except subprocess.TimeoutExpired:
-                self.kill()
-        self.returncode = self.proc.wait()
-        self._close()
-        return self.returncode
-
-    def kill(self) -> None:
-        """Kill the whole process group (its children too), now."""
-        try:
-            os.killpg(self.proc.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-        self.proc.wait()
-        self._close()
-
-    def _close(self) -> None:
-        for stream in (self._out, self._err):
-            if not stream.closed:
-                stream.close()
-
-    def output(self) -> str:
-        """Return everything the process wrote so far (stdout then stderr)."""
-        for stream in (self._out, self._err):
-            if not stream.closed:
-                stream.flush()
-        return (self.out_path.read_text(errors='replace') + '\n'
-                + self.err_path.read_text(errors='replace'))
-
-    def __enter__(self) -> NodeProcess:
-        """Return self."""
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        """Make sure nothing outlives the block."""
-        if self.proc.poll() is None:
-            self.kill()
-        self._close()
+        return super().stop(sig, timeout, **kwargs)
 
 
 def node_command(params_file: Path | None, *overrides: str,

@@ -26,6 +26,7 @@ from typing import Iterator
 
 import cv2
 from mechdeconv_ros.demo_camera import Chart, convert_rgb, DemoCamera
+from mechdeconv_ros.graph_env import pick_domain_id
 from mechdeconv_ros.image_msgs import image_to_array
 from mechdeconv_ros.model import build_model, LensModel
 from mechdeconv_ros.params import load_params_file
@@ -191,7 +192,7 @@ def _is_zombie(pid: int) -> bool:
 def context() -> Iterator[Context]:
     """Give each camera test its own rclpy Context on a private domain."""
     ctx = Context()
-    rclpy.init(context=ctx, domain_id=1 + (os.getpid() * 13) % 100)
+    rclpy.init(context=ctx, domain_id=pick_domain_id('tests', 500))
     try:
         yield ctx
     finally:

@@ -65,7 +65,7 @@ def test_radial_map_is_dense_monotonic_and_paraxial_at_centre(case2):
     assert np.all(np.diff(curve.real_mm) > 0)
     assert curve.real_mm[0] == 0.0
     assert_allclose(curve.real_mm[1] / curve.ideal_mm[1], 1.0, atol=1e-6)
-    # Past the output corner, as DESIGN asks.
+    # Past the output corner (docs/design.md section 2.5).
     corner = math.hypot(320 / case2.K_new[0, 0], 240 / case2.K_new[1, 1])
     assert curve.valid_ideal_mm >= corner * case2.image_distance_mm
     # This lens with its stop inside the glass is barrel-distorted at the corner.

@@ -10,7 +10,7 @@ paraxial data and the real chief-ray heights on the sensor plane at >= 64 field 
 the axis to past the sensor corner, aimed by optiland's iterative ray aiming to cross the
 stop centre within 1e-11 mm.
 
-Asserted (DESIGN.md section 4, "accuracy vs an independent optical package"):
+Asserted (the accuracy targets of docs/design.md section 5):
 
 - focal length, image distance and sensor position agree to 1e-6 relative, the principal
   planes to 1e-6 of the focal length;
@@ -46,7 +46,7 @@ DATA = json.loads(REFERENCE.read_text())
 LENSES = DATA['lenses']
 THICK = [key for key, lens in LENSES.items() if lens['kind'] == 'thick_lens']
 
-#: Tolerances of DESIGN.md section 4 and of the brief.
+#: Tolerances of docs/design.md section 5.
 PARAXIAL_RTOL = 1e-6
 CURVE_TOL_PX = 0.01
 

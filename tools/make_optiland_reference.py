@@ -11,7 +11,7 @@ of ``requirements-reference.txt`` (``pip install -r requirements-reference.txt``
     python tools/make_optiland_reference.py            # writes test/data/optiland_reference.json
     python tools/make_optiland_reference.py -o out.json
 
-Conventions (DESIGN.md section 2): mm; optical axis z, light travels +z, first lens vertex at
+Conventions (docs/design.md section 1): mm; optical axis z, light travels +z, first lens vertex at
 z = 0; radius > 0 when the centre of curvature is on the image side, 0 = flat; thickness =
 axial distance to the next surface; index = index after the surface. One wavelength
 (0.55 um) and constant-index ``IdealMaterial`` glasses, so no dispersion enters.
