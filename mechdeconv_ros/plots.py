@@ -1,8 +1,10 @@
 # Copyright 2026 The mechdeconv_ros Authors.
 # SPDX-License-Identifier: Apache-2.0
 """
-Pictures of a LensModel: distortion curve, displacement field, a grid before and after, and
-the relative illumination (curve and raw attenuation map).
+Pictures of a LensModel: distortion, a grid before and after, relative illumination.
+
+Panels: the distortion curve, the displacement field, a grid before and after the
+correction, and the relative illumination (curve and raw attenuation map).
 
 Matplotlib with the Agg backend (no display needed). The grid is rendered in the ideal
 (corrected) image and pushed through the forward model to make what the camera would see, so
@@ -174,8 +176,10 @@ def make_figure(model: LensModel) -> Any:
 
 def illumination_panels(model: LensModel, curve_ax: Any, map_ax: Any, fig: Any) -> None:
     """
-    Draw the relative illumination: RI and pupil pass fraction over the real image height,
-    and the attenuation at each raw pixel (what ``mechdeconv vignetting --png`` writes).
+    Draw the relative illumination panels.
+
+    RI and the pupil pass fraction over the real image height, and the attenuation at each
+    raw pixel (what ``mechdeconv vignetting --png`` writes).
 
     :param model: the lens model.
     :param curve_ax: axes for the curves.
@@ -192,7 +196,7 @@ def illumination_panels(model: LensModel, curve_ax: Any, map_ax: Any, fig: Any) 
     curve_ax.plot(curve.height_mm, curve.ri, color='tab:blue', label='relative illumination')
     if curve.pupil_pass_fraction is not None:
         curve_ax.plot(curve.height_mm, curve.pupil_pass_fraction, color='tab:green', ls='--',
-                      label='share of the stop\'s beam passing the other apertures')
+                      label="share of the stop's beam passing the other apertures")
     gain = float(model.values['output.max_vignetting_gain'])
     curve_ax.axhline(1.0 / gain, color='tab:red', lw=0.8, ls=':',
                      label=f'1 / max gain ({gain:g}): corrected field ends below')
