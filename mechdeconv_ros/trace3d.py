@@ -46,6 +46,9 @@ import numpy as np
 #: A ray that must travel backwards by more than this to reach a later surface fails.
 BACKWARD_TOLERANCE_MM = 1e-9
 
+#: The margin of a ray that fails other than at an aperture rim (:func:`trace_margin`).
+FAILED = -2.0
+
 _ERRSTATE = {'invalid': 'ignore', 'divide': 'ignore', 'over': 'ignore'}
 
 
@@ -156,9 +159,10 @@ def trace_margin(system: System, x: np.ndarray, y: np.ndarray, z: np.ndarray,
     Trace rays and return how far inside the clear apertures they pass.
 
     The margin is min over the clipping apertures of (R - r) / R, r the ray's radius where it
-    meets an aperture of clear radius R (1 without any), and -1 for a ray that fails in any
-    other way (miss, lens edge, TIR). A ray passes when its margin is >= 0; across an aperture
-    rim the margin is continuous, which lets a root finder locate the rim in a few steps.
+    meets an aperture of clear radius R (1 without any), clamped at -1, and :data:`FAILED`
+    (-2) for a ray that fails in any other way (miss, lens edge, TIR). A ray passes when its
+    margin is >= 0; across an aperture rim the margin is continuous, which lets a root finder
+    locate the rim in a few steps.
 
     :param system: the elements in the order the rays meet them.
     :return: the margins (the broadcast shape of the inputs).
@@ -200,7 +204,8 @@ def _trace(system: System, x: np.ndarray, y: np.ndarray, z: np.ndarray,
             if e.n_before != e.n_after:
                 kx, ky, kz = refract(kx, ky, kz, nx, ny, nz, e.n_before, e.n_after)
                 bad |= ~(kz > 0)
-    margin[bad | np.isnan(margin)] = -1.0
+    np.maximum(margin, -1.0, out=margin)
+    margin[bad | np.isnan(margin)] = FAILED
     return margin, (x, y, z, kx, ky, kz)
 
 
