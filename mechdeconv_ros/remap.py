@@ -23,6 +23,8 @@ bilinear remap on our machines, and a nearest-neighbour CV_16SC2 map is kept for
 
 from __future__ import annotations
 
+from typing import Any
+
 import cv2
 from mechdeconv_ros.illumination import Illumination
 from mechdeconv_ros.model import LensModel
@@ -31,19 +33,21 @@ import numpy.typing as npt
 
 #: Where invalid output pixels point: far enough outside any source for BORDER_CONSTANT.
 _OUTSIDE = -1000.0
-#: Samples of the gain table over the real sensor radius (linear look-up between them).
-GAIN_TABLE_SAMPLES = 1024
 
 
 def _quadrant_scale(model: LensModel, xn: npt.NDArray[np.float32],
-                    yn: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
+                    yn: npt.NDArray[np.float32],
+                    gain_table: npt.NDArray[np.float64] | None = None) -> Any:
     """
     Return ``s = R(rho) / rho`` on the grid ``yn x xn`` (both >= 0); -1 outside the field.
 
     :param model: the lens model.
     :param xn: normalised ideal x of the quadrant's columns.
     :param yn: normalised ideal y of the quadrant's rows.
-    :return: ``(len(yn), len(xn))`` float32.
+    :param gain_table: the vignetting gain at each ideal radius of ``model.curve`` (or None);
+        it is looked up in the same ``cv2.remap`` pass, as a second channel of the table.
+    :return: ``(len(yn), len(xn))`` float32, or ``(scale, gain)`` with a gain table (the gain
+        is 0 outside the field).
     """
     curve = model.curve
     v = model.image_distance_mm
@@ -52,15 +56,21 @@ def _quadrant_scale(model: LensModel, xn: npt.NDArray[np.float32],
     # Table of s over the uniformly spaced ideal radii (s(0) = 1: paraxial at the centre).
     with np.errstate(invalid='ignore', divide='ignore'):
         table = np.where(curve.ideal_mm > 0.0, curve.real_mm / curve.ideal_mm, 1.0)
-    table = np.ascontiguousarray(table[None, :], dtype=np.float32)
+    if gain_table is not None:
+        table = np.stack([table, gain_table], axis=-1)
+    table = np.ascontiguousarray(table[None], dtype=np.float32)
     # One CV_32FC2 map (x = table index, y = 0 on the one-row table) for cv2.remap.
     index = np.zeros((len(yn), len(xn), 2), np.float32)
     np.hypot(xn[None, :], yn[:, None], out=index[..., 0])
     index[..., 0] *= np.float32(v / step)
-    scale = cv2.remap(table, index, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
-                      borderValue=-1.0)
-    scale[index[..., 0] > samples - 1] = -1.0
-    return scale
+    looked_up = cv2.remap(table, index, None, cv2.INTER_LINEAR,
+                          borderMode=cv2.BORDER_CONSTANT, borderValue=(-1.0, 0.0, 0.0, 0.0))
+    outside = index[..., 0] > samples - 1
+    if gain_table is None:
+        looked_up[outside] = -1.0
+        return looked_up
+    looked_up[outside] = (-1.0, 0.0)
+    return looked_up[..., 0], looked_up[..., 1]
 
 
 Map = npt.NDArray[np.float32]
@@ -78,20 +88,18 @@ def build_float_maps(model: LensModel) -> tuple[Map, Map]:
     return map_x, map_y
 
 
-def _gain_table(illumination: Illumination, max_gain: float,
-                samples: int = GAIN_TABLE_SAMPLES) -> tuple[Map, float]:
+def _gain_table(model: LensModel, illumination: Illumination,
+                max_gain: float) -> npt.NDArray[np.float64]:
     """
-    Tabulate the gain min(1/RI, max_gain) over the real sensor radius; 0 where RI < 1/max.
+    Tabulate the gain min(1/RI, max_gain) at the ideal radii of ``model.curve``.
 
-    :return: the one-row float32 table and its step in mm.
+    RI is taken at the real radius each ideal radius images to; the gain is 0 where
+    RI < 1 / max_gain (the corrected field ends there).
     """
-    reach = float(illumination.height_mm[-1])
-    radius = np.linspace(0.0, reach, samples)
-    ri = illumination.at(radius)
+    ri = illumination.at(model.curve.real_mm)
     with np.errstate(divide='ignore'):
         gain = np.where(ri >= 1.0 / max_gain, 1.0 / np.maximum(ri, 1e-12), 0.0)
-    return np.ascontiguousarray(np.minimum(gain, max_gain)[None, :], dtype=np.float32), \
-        reach / (samples - 1)
+    return np.minimum(gain, max_gain)
 
 
 def build_gain_map(model: LensModel, illumination: Illumination, max_gain: float) -> Map:
@@ -107,7 +115,7 @@ def build_gain_map(model: LensModel, illumination: Illumination, max_gain: float
     :param max_gain: the largest gain (>= 1).
     :return: ``(out_height, out_width)`` float32.
     """
-    return _build_maps(model, _gain_table(illumination, max_gain))[2]
+    return _build_maps(model, _gain_table(model, illumination, max_gain))[2]
 
 
 def _mirror_quadrant(full: np.ndarray, quad: np.ndarray, c0: int, r0: int) -> None:
@@ -118,9 +126,9 @@ def _mirror_quadrant(full: np.ndarray, quad: np.ndarray, c0: int, r0: int) -> No
     full[:r0] = full[oh - r0:oh][::-1]
 
 
-def _build_maps(model: LensModel, gain_table: tuple[Map, float] | None
+def _build_maps(model: LensModel, gain_table: npt.NDArray[np.float64] | None
                 ) -> tuple[Map, Map, Map | None]:
-    """Build the float maps and, given a gain table over the real radius, the gain map."""
+    """Build the float maps and, given a gain table over the curve's ideal radii, the gain."""
     ow, oh = model.out_width, model.out_height
     fx, fy, cx, cy = model.K[0, 0], model.K[1, 1], model.K[0, 2], model.K[1, 2]
     xn = ((np.arange(ow) - model.K_new[0, 2]) / model.K_new[0, 0]).astype(np.float32)
@@ -128,22 +136,15 @@ def _build_maps(model: LensModel, gain_table: tuple[Map, float] | None
     # Output column u and ow-1-u have opposite xn (likewise rows): compute the lower-right
     # quadrant, then mirror it: map_x(ow-1-u) = 2 c_x - map_x(u), and map_y likewise.
     c0, r0 = ow // 2, oh // 2
-    scale = _quadrant_scale(model, xn[c0:], yn[r0:])
-    invalid = scale < 0.0
     gain = None
-    if gain_table is not None:
-        # Real radius of each quadrant pixel's source, rho_real = s v hypot(xn, yn), in
-        # steps of the table; the look-up runs through cv2.remap as in _quadrant_scale.
-        table, step = gain_table
-        index = np.zeros((oh - r0, ow - c0, 2), np.float32)
-        np.hypot(xn[c0:][None, :], yn[r0:][:, None], out=index[..., 0])
-        index[..., 0] *= scale
-        index[..., 0] *= np.float32(model.image_distance_mm / step)
-        quad_gain = cv2.remap(table, index, None, cv2.INTER_LINEAR,
-                              borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
-        quad_gain[invalid] = 0.0
+    if gain_table is None:
+        scale = _quadrant_scale(model, xn[c0:], yn[r0:])
+    else:
+        # The gain depends on the ideal radius only, as s does: one look-up for both.
+        scale, quad_gain = _quadrant_scale(model, xn[c0:], yn[r0:], gain_table)
         gain = np.empty((oh, ow), np.float32)
         _mirror_quadrant(gain, quad_gain, c0, r0)
+    invalid = scale < 0.0
     map_x = np.empty((oh, ow), np.float32)
     map_y = np.empty((oh, ow), np.float32)
     quad_x = map_x[r0:, c0:]
@@ -193,7 +194,7 @@ class Rectifier:
         if vignetting:
             max_gain = float(model.values.get('output.max_vignetting_gain', 4.0))
             curve = model.illumination(with_fraction=False)
-            table = _gain_table(curve, max_gain)
+            table = _gain_table(model, curve, max_gain)
             ends = np.flatnonzero(curve.ri < 1.0 / max_gain)
             if ends.size and curve.height_mm[ends[0]] < curve.corner_height_mm:
                 self.vignetting_warning = (
