@@ -75,7 +75,7 @@ SCAN_SAMPLES = 128
 #: estimate (direction cosine) below which it stops.
 ROWS = 16
 ROOT_STEPS = 40
-EDGE_TOLERANCE = 1e-8
+EDGE_TOLERANCE = 1e-6
 #: A margin this small is the rim itself.
 ROOT_MARGIN = 1e-13
 #: Multiples of the meridional half-width probed to bracket each row's half-width.

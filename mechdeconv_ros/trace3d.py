@@ -160,9 +160,10 @@ def trace_margin(system: System, x: np.ndarray, y: np.ndarray, z: np.ndarray,
 
     The margin is min over the clipping apertures of (R - r) / R, r the ray's radius where it
     meets an aperture of clear radius R (1 without any), clamped at -1, and :data:`FAILED`
-    (-2) for a ray that fails in any other way (miss, lens edge, TIR). A ray passes when its
-    margin is >= 0; across an aperture rim the margin is continuous, which lets a root finder
-    locate the rim in a few steps.
+    (-2) for a ray that fails in any other way (miss, lens edge, TIR) while inside every
+    aperture so far (a ray clipped before it fails keeps its negative margin). A ray passes
+    when its margin is >= 0; across an aperture rim the margin is continuous, which lets a
+    root finder locate the rim in a few steps.
 
     :param system: the elements in the order the rays meet them.
     :return: the margins (the broadcast shape of the inputs).
@@ -205,7 +206,9 @@ def _trace(system: System, x: np.ndarray, y: np.ndarray, z: np.ndarray,
                 kx, ky, kz = refract(kx, ky, kz, nx, ny, nz, e.n_before, e.n_after)
                 bad |= ~(kz > 0)
     np.maximum(margin, -1.0, out=margin)
-    margin[bad | np.isnan(margin)] = FAILED
+    # A ray that an aperture had clipped before it failed otherwise keeps that (continuous)
+    # margin; only a ray whose hard failure is the limit gets FAILED.
+    margin[np.isnan(margin) | (bad & (margin >= 0.0))] = FAILED
     return margin, (x, y, z, kx, ky, kz)
 
 
