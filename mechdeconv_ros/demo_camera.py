@@ -24,11 +24,11 @@ model's corrected image and mapped with that model's ``K_new`` (normalised coord
 later lens (another focal length, stop offset) therefore sees the same chart at another scale
 and distortion, as a real camera would.
 
-Publishing follows shared/reference/perf-anchors.md section 5: one ``Image`` per size and
-encoding, ``data`` set once to ``array.array('B', bytes(n))`` and written through a numpy view
-(:func:`mechdeconv_ros.image_msgs.new_output_image`). The chart is static, so the pixels are
-rendered once per model and each tick only sets ``header.stamp`` (the publish time) and
-publishes.
+Publishing follows docs/design.md section 4.4 (pixels in and out of rclpy): one ``Image``
+per size and encoding, ``data`` set once to ``array.array('B', bytes(n))`` and written through
+a numpy view (:func:`mechdeconv_ros.image_msgs.new_output_image`). The chart is static, so
+the pixels are rendered once per model and each tick only sets ``header.stamp`` (the publish
+time) and publishes.
 """
 
 from __future__ import annotations
@@ -37,12 +37,12 @@ import sys
 from typing import Any, Sequence
 
 import cv2
-from mechdeconv_ros.correct_node import descriptor_for
 from mechdeconv_ros.image_msgs import ImageFormatError, new_output_image, OutputImage
 from mechdeconv_ros.model import build_model, LensModel, ModelError
 from mechdeconv_ros.params import check_values, load_params_file, ParamSpec, SCHEMA
 from mechdeconv_ros.plots import grid_image
 from mechdeconv_ros.remap import distortion_maps
+from mechdeconv_ros.ros_params import declare_schema
 import numpy as np
 import numpy.typing as npt
 from rcl_interfaces.msg import (
@@ -214,18 +214,7 @@ class DemoCamera(Node):
                       'header.frame_id of the images (REP-103 optical frame).',
                       ParameterType.PARAMETER_STRING)
         base = self._file_values(str(self.get_parameter('params_file').value))
-        for spec in camera_specs():
-            default = base[spec.name]
-            if spec.type == 'double_array' and not default:
-                # An empty list would be declared as a BYTE_ARRAY: declare the type instead.
-                default = Parameter.Type.DOUBLE_ARRAY
-            self.declare_parameter(spec.name, default, descriptor_for(spec))
-        unset = [Parameter(spec.name, Parameter.Type.DOUBLE_ARRAY, [])
-                 for spec in camera_specs() if spec.type == 'double_array'
-                 and self.get_parameter_or(spec.name).type_ == Parameter.Type.NOT_SET]
-        if unset:
-            self.set_parameters(unset)
-        self._values = self._current_values()
+        self._values = self._current_values(declare_schema(self, camera_specs(), base))
         self._model = self._build(self._values)
         self._chart = Chart(self._model)
         self._out = self._render(self._model, self._values)
@@ -262,13 +251,10 @@ class DemoCamera(Node):
         except OSError as err:
             raise ValueError(f'params_file: cannot read {path}: {err.strerror}') from None
 
-    def _current_values(self) -> dict[str, Any]:
-        names = ['width', 'height', 'encoding', 'rate_hz', 'frame_id']
-        names += [spec.name for spec in camera_specs()]
-        values = {}
-        for name in names:
-            value = self.get_parameter(name).value
-            values[name] = [] if value is None else value
+    def _current_values(self, lens_values: dict[str, Any]) -> dict[str, Any]:
+        values = {name: self.get_parameter(name).value
+                  for name in ('width', 'height', 'encoding', 'rate_hz', 'frame_id')}
+        values.update(lens_values)
         return values
 
     @staticmethod

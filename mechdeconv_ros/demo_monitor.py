@@ -68,7 +68,7 @@ class Monitor(Node):
 
     def _on_diag(self, msg: DiagnosticArray) -> None:
         for status in msg.status:
-            if status.name.startswith('correct_node'):
+            if status.name.endswith('correct_node: lens correction'):
                 with self.lock:
                     self.diag = {kv.key: kv.value for kv in status.values}
                     self.diag_message = status.message

@@ -331,3 +331,14 @@ def camera_info_from_model(model: LensModel, *, rectified: bool) -> CameraInfo:
     :return: the message, with an empty header.
     """
     return fill_camera_info(CameraInfo(), model, rectified=rectified)
+
+
+def camera_infos_from_model(model: LensModel) -> tuple[CameraInfo, CameraInfo]:
+    """
+    Return the ``camera_info`` and ``camera_info_rect`` messages of a model.
+
+    :param model: the lens model.
+    :return: ``(raw camera, corrected image)``, see :func:`fill_camera_info`.
+    """
+    return (camera_info_from_model(model, rectified=False),
+            camera_info_from_model(model, rectified=True))

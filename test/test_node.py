@@ -547,6 +547,8 @@ def test_diagnostics_carry_the_model_summary_and_counters(
                         rtol=1e-5)
     assert int(diag['frames_out']) >= 1
     assert float(diag['last_rebuild_ms']) > 0.0
+    # The status is named after the fully qualified node name (two cameras, two statuses).
+    assert harness.diagnostics[-1].status[0].name == '/correct_node: lens correction'
 
 
 # ---------------------------------------------------------------------------------------------

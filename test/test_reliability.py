@@ -1247,3 +1247,25 @@ def test_rebuild_thread_is_a_daemon_and_ends_with_the_node() -> None:
     finally:
         rclpy.try_shutdown(context=context)
         cv2.setNumThreads(threads)
+
+
+def test_diagnostics_status_is_named_after_the_fully_qualified_node_name() -> None:
+    import cv2
+    import rclpy
+    from rclpy.context import Context
+    from mechdeconv_ros.correct_node import CorrectNode
+    from mechdeconv_ros.diagnostics import status_name
+
+    threads = cv2.getNumThreads()
+    context = Context()
+    rclpy.init(context=context, domain_id=next_domain_id())
+    try:
+        node = CorrectNode(context=context, namespace='left', parameter_overrides=[
+            Parameter('sensor.width_px', value=64), Parameter('sensor.height_px', value=48)])
+        try:
+            assert status_name(node) == '/left/correct_node: lens correction'
+        finally:
+            node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+        cv2.setNumThreads(threads)
