@@ -4,6 +4,8 @@ PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+# Options of the demo, e.g. make demo DEMO_ARGS='--seconds 5'.
+DEMO_ARGS ?=
 # Every process of a ROS graph we start uses the large shared-memory Fast DDS profile and the
 # glibc settings that stop per-frame mmap/munmap of multi-MB buffers (README, "Transport").
 export FASTRTPS_DEFAULT_PROFILES_FILE ?= $(CURDIR)/config/fastdds_shm.xml
@@ -29,7 +31,7 @@ test: $(STAMP)
 	$(PY) -m pytest test
 
 demo: $(STAMP)
-	$(PY) -m mechdeconv_ros.demo
+	$(PY) -m mechdeconv_ros.demo $(DEMO_ARGS)
 
 bench: $(STAMP)
 	$(PY) -m pip install --disable-pip-version-check -q -r requirements-bench.txt

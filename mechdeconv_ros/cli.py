@@ -108,10 +108,14 @@ def format_report(report: dict[str, Any]) -> str:
         f"hyperfocal {report['hyperfocal_mm']:.4g} ± {report['hyperfocal_sigma_mm']:.2g} mm, "
         f"depth of field {mm(dof['near'])} to {mm(dof['far'])}",
         f"distortion: max displacement {report['max_displacement_px']:.3f} px, "
-        f"corner sigma {report['corner_sigma_px']:.3g} px",
+        # no corner sigma when the corners lie outside the image circle (a fisheye)
+        'corner sigma ' + ('n/a' if report['corner_sigma_px'] is None
+                           else f"{report['corner_sigma_px']:.3g} px"),
         f"equivalent calibration: {report['distortion_model']} D = "
-        f"[{', '.join(f'{d:.6g}' for d in report['D'])}] (fit RMS "
-        f"{report['fit_rms_px']:.2g} px)",
+        f"[{', '.join(f'{d:.6g}' for d in report['D'])}] (max error "
+        f"{_px(report['equivalent_max_error_px'])} over the raw image, RMS "
+        f"{_px(report['fit_rms_px'])})",
+        _field_line(report),
     ]
     ri = report.get('relative_illumination')
     if ri:
@@ -124,9 +128,32 @@ def format_report(report: dict[str, Any]) -> str:
     return '\n'.join(lines)
 
 
+def _px(value: float | None) -> str:
+    return 'n/a' if value is None else f'{value:.2g} px'
+
+
+def _field_line(report: dict[str, Any]) -> str:
+    """Return the field line: lens limit, raw corner, image circle and the output projection."""
+    field = report['covered_field']
+
+    def deg(value: float | None) -> str:
+        return 'outside the image circle' if value is None else f'{value:.1f} deg'
+
+    least = 'at least ' if field['max_field_is_trace_limit'] else ''
+    return (f"field: the lens passes {least}{report['max_field_angle_deg']:.1f} deg off axis "
+            f"(image circle r = {field['image_circle_radius_mm']:.4g} mm); raw corner "
+            f"{deg(field['corner_field_angle_deg'])}; {report['projection']} output corner "
+            f"{deg(field['output_corner_field_angle_deg'])}")
+
+
 def cmd_camera_info(args: argparse.Namespace) -> int:
     """Print the camera_calibration_parsers YAML of the raw camera."""
-    sys.stdout.write(camera_info_yaml(_model(args)))
+    model = _model(args)
+    # A YAML comment: camera_calibration_parsers ignores it, a person reads it.
+    sys.stdout.write(f'# equivalent calibration {model.distortion_model}: largest displacement '
+                     f'{model.equivalent_max_error_px:.3g} px over the raw image (what a '
+                     'consumer rectifying with it is off by)\n')
+    sys.stdout.write(camera_info_yaml(model))
     return 0
 
 

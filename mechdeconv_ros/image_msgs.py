@@ -290,7 +290,9 @@ def fill_camera_info(info: CameraInfo, model: LensModel, *, rectified: bool) -> 
     ``camera_info``: the raw image size, ``K`` and ``D`` of the raw (distorted) camera with
     ``D`` the equivalent plumb_bob / rational_polynomial coefficients, ``R`` identity and
     ``P = [K_new | 0]``. ``rectified=True`` describes the corrected image itself: the output
-    size, ``K = K_new``, ``D`` all zero (plumb_bob), ``R`` identity, the same ``P``.
+    size, ``K = K_new``, ``D`` all zero (plumb_bob; ``equidistant`` with four zeros when
+    ``output.projection`` is equidistant: the corrected image is then an ideal fisheye,
+    r = f theta, with f from ``K_new``), ``R`` identity, the same ``P``.
 
     :param info: the message to fill (modified in place).
     :param model: the lens model.
@@ -300,8 +302,13 @@ def fill_camera_info(info: CameraInfo, model: LensModel, *, rectified: bool) -> 
     if rectified:
         info.width = int(model.out_width)
         info.height = int(model.out_height)
-        info.distortion_model = 'plumb_bob'
-        info.d = [0.0] * 5
+        if model.projection == 'equidistant':
+            # An ideal fisheye (r = f theta): cv2.fisheye / image_geometry read D = 0 as such.
+            info.distortion_model = 'equidistant'
+            info.d = [0.0] * 4
+        else:
+            info.distortion_model = 'plumb_bob'
+            info.d = [0.0] * 5
         info.k = np.asarray(model.K_new, dtype=np.float64).reshape(9)
     else:
         info.width = int(model.width)

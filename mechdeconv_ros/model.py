@@ -21,11 +21,21 @@ The model (Lim & Furukawa 2008, with the distortion traced instead of approximat
    (``alpha = 0``) and the one that keeps every source pixel (``alpha = 1``), as OpenCV's
    getOptimalNewCameraMatrix does (but with one scale for both axes, so the pixel aspect is
    kept).
-5. The equivalent calibration fits OpenCV/ROS radial coefficients to the traced curve in
-   normalised coordinates ``r_u = rho_ideal / v``, ``r_d = rho_real / v``:
-   plumb_bob ``r_d = r_u (1 + k1 r_u^2 + k2 r_u^4 + k3 r_u^6)``, or rational_polynomial
-   ``r_d (1 + k4 r_u^2 + k5 r_u^4 + k6 r_u^6) = r_u (1 + k1 r_u^2 + k2 r_u^4 + k3 r_u^6)``
-   when plumb_bob misses by more than 0.1 px RMS. Both are linear least squares.
+5. The equivalent calibration (``camera_info``'s D) is one of the models ROS consumers read,
+   fitted to the traced field: plumb_bob ``r_d = r_u (1 + k1 r_u^2 + k2 r_u^4 + k3 r_u^6)``,
+   rational_polynomial ``r_d (1 + k4 r_u^2 + k5 r_u^4 + k6 r_u^6) = r_u (1 + k1 r_u^2 +
+   k2 r_u^4 + k3 r_u^6)`` (``r_u = tan(theta)``) or equidistant (Kannala-Brandt, cv2.fisheye)
+   ``r_d = theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8)``, with
+   ``r_d = rho_real / v``. Each is fitted by least squares refined towards the minimax, then
+   measured by its LARGEST displacement over the raw image (where a consumer's rectification
+   map puts each raw pixel against the trace); the first in that order within 0.05 px is
+   published, else the one with the smallest error (``equivalent_max_error_px``). Pinhole
+   models cannot describe a field of 90 deg or more.
+6. The field is traced by angle: the chief-ray angle theta of every sample is kept, and
+   ``output.projection`` makes the corrected image a pinhole (``rho_ideal = v tan(theta)``, at
+   most 85 deg) or an ideal fisheye (``equidistant``, ``rho_ideal = v theta``, any field, past
+   90 deg for a scene at infinity). Where the real height folds back or a ray fails the valid
+   field ends (a fold is reported as a warning).
 
 Pixel coordinates follow OpenCV and ROS (REP-103 optical frame): x right, y down, origin at the
 centre of the top-left pixel.
@@ -34,6 +44,7 @@ centre of the top-left pixel.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+import functools
 import math
 from typing import Any, Callable, Mapping
 
@@ -43,7 +54,8 @@ from mechdeconv_ros.optics import biconvex_for_focal_length, propagate_sigma, th
 from mechdeconv_ros.params import (
     ASPHERE_POWERS, check_values, INTERPOLATIONS, MAX_FRAME_PIXELS, ParamValue)
 from mechdeconv_ros.raytrace import (
-    image_plane, paraxial, Prescription, Surface, trace_chief_rays, vertex_z)
+    image_plane, paraxial, Prescription, Surface, trace_chief_rays, trace_field_angles,
+    vertex_z)
 from mechdeconv_ros.surfaces import domain_limit_mm
 import numpy as np
 import numpy.typing as npt
@@ -54,8 +66,14 @@ FloatArray = npt.NDArray[np.float64]
 #: Samples of the radial map (at least 1024 from 0 to past the output corner: docs/design.md
 #: section 2.5).
 CURVE_SAMPLES = 2048
-#: Plumb_bob fits worse than this (px RMS) switch to rational_polynomial.
-PLUMB_BOB_MAX_RMS_PX = 0.1
+#: Largest field angle a pinhole (rectilinear) output shows: its radial magnification
+#: 1/cos^2(theta) grows without bound towards 90 deg (11x at 73, 130x at 85 deg).
+PINHOLE_MAX_FIELD_DEG = 85.0
+#: Largest field angle traced for a scene at infinity (a fisheye sees behind its front
+#: vertex; 180 deg would be the axis behind the camera), and for a finite scene plane (whose
+#: height l tan(theta) is infinite at 90 deg).
+MAX_FIELD_DEG_INFINITE = 179.0
+MAX_FIELD_DEG_FINITE = 89.5
 #: OpenCV interpolation flags by the names ``output.interpolation`` accepts.
 CV_INTERPOLATION = {'nearest': 0, 'linear': 1, 'cubic': 2, 'lanczos4': 4}
 assert tuple(CV_INTERPOLATION) == INTERPOLATIONS
@@ -86,12 +104,17 @@ class RadialMap:
     """
     The traced radial map ``rho_real = R(rho_ideal)`` on the sensor, in mm.
 
-    ``ideal_mm`` is uniformly spaced from 0; ``real_mm`` is strictly increasing. Beyond
-    ``ideal_mm[-1]`` (``valid_ideal_mm``) the field is not valid.
+    ``ideal_mm`` is uniformly spaced from 0: the ideal height in the map's projection, v tan
+    theta (pinhole) or v theta (equidistant); ``real_mm`` is strictly increasing and
+    ``field_angle_rad`` holds the object-space chief-ray angle theta of each sample. Beyond
+    ``ideal_mm[-1]`` (``valid_ideal_mm``) the field is not valid; ``folded`` says that it ends
+    because the real height stops increasing (a fold), not because a ray fails.
     """
 
     ideal_mm: FloatArray
     real_mm: FloatArray
+    field_angle_rad: FloatArray | None = None
+    folded: bool = False
 
     @property
     def valid_ideal_mm(self) -> float:
@@ -113,6 +136,22 @@ class RadialMap:
         ideal_mm = np.asarray(ideal_mm, dtype=np.float64)
         out = np.interp(ideal_mm, self.ideal_mm, self.real_mm)
         return np.where(ideal_mm <= self.valid_ideal_mm, out, np.nan)
+
+    @property
+    def max_field_angle_rad(self) -> float:
+        """Return the field angle of the last valid sample."""
+        return float(self.field_angle_rad[-1]) if self.field_angle_rad is not None else math.nan
+
+    def angle_from_real(self, real_mm: FloatArray) -> FloatArray:
+        """
+        Return the field angle theta (rad) imaged at real radii; NaN beyond the valid field.
+
+        :param real_mm: real radii, mm, any shape.
+        :return: theta in rad.
+        """
+        real_mm = np.asarray(real_mm, dtype=np.float64)
+        out = np.interp(real_mm, self.real_mm, self.field_angle_rad)
+        return np.where(real_mm <= self.valid_real_mm, out, np.nan)
 
     def ideal_from_real(self, real_mm: FloatArray) -> FloatArray:
         """
@@ -151,7 +190,11 @@ class LensModel:
     distortion_model: str
     fit_rms_px: float
     max_displacement_px: float
+    equivalent_max_error_px: float
+    equivalent_fits: tuple[EquivalentFit, ...]
     interpolation: int
+    projection: str = 'pinhole'
+    field_curve: RadialMap | None = None
     _summary_cache: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
     _illumination_cache: dict[bool, Illumination] = field(default_factory=dict, repr=False,
                                                           compare=False)
@@ -232,9 +275,10 @@ class LensModel:
         """
         Return every derived quantity as a JSON-ready dict (infinite distances are ``None``).
 
-        :return: the summary with K, D, P and a subsampled distortion curve.
+        :return: the summary with K, D, P and the distortion curve over the whole field the
+            lens passes (``field_angle_deg``, ``ideal_height_mm`` = v tan(theta), None from
+            90 deg, ``real_height_mm``), at most 257 samples.
         """
-        step = max(1, len(self.curve.ideal_mm) // 256)
         out = dict(self.summary)
         try:
             illumination: dict[str, Any] | None = self.illumination().report()
@@ -248,13 +292,25 @@ class LensModel:
             'distortion_model': self.distortion_model,
             'K_new': self.K_new.round(10).tolist(), 'P': self.P.round(10).tolist(),
             'fit_rms_px': self.fit_rms_px,
+            'equivalent_max_error_px': self.equivalent_max_error_px,
+            'equivalent_models': {fit.distortion_model: {'max_error_px': fit.max_error_px,
+                                                         'rms_error_px': fit.rms_error_px}
+                                  for fit in self.equivalent_fits},
             'max_displacement_px': self.max_displacement_px,
-            'distortion_curve': {
-                'ideal_height_mm': self.curve.ideal_mm[::step].tolist(),
-                'real_height_mm': self.curve.real_mm[::step].tolist(),
-            },
             'relative_illumination': illumination,
         })
+        field = out.pop('_field_curve')
+        theta, real = field['theta_rad'], field['real_mm']
+        pick = np.unique(np.linspace(0, theta.size - 1, min(theta.size, 257)).round()
+                         .astype(int))
+        with np.errstate(invalid='ignore', over='ignore'):
+            ideal = np.where(theta[pick] < 0.5 * math.pi,
+                             self.image_distance_mm * np.tan(theta[pick]), np.nan)
+        out['distortion_curve'] = {
+            'field_angle_deg': np.degrees(theta[pick]).tolist(),
+            'ideal_height_mm': ideal.tolist(),
+            'real_height_mm': real[pick].tolist(),
+        }
         return _json_safe(out)
 
 
@@ -412,15 +468,36 @@ def _image_size(values: Mapping[str, Any], width: int, height: int) -> tuple[int
 
 
 def _trace_curve(prescription: Prescription, distance: float, sensor_z: float, v: float,
-                 ideal_max_mm: float, samples: int) -> RadialMap:
-    """Trace ``samples`` chief rays from 0 to ``ideal_max_mm`` and keep the valid prefix."""
+                 ideal_max_mm: float, samples: int, projection: str = 'pinhole') -> RadialMap:
+    """
+    Trace ``samples`` chief rays from 0 to ``ideal_max_mm`` and keep the valid prefix.
+
+    The ideal heights are uniform in the projection: v tan(theta) for ``pinhole``, v theta for
+    ``equidistant`` (which reaches past 90 deg for a scene at infinity).
+    """
     ideal = np.linspace(0.0, ideal_max_mm, samples)
-    real = -trace_chief_rays(prescription, distance, sensor_z, ideal / v)
+    if projection == 'pinhole':
+        real = -trace_chief_rays(prescription, distance, sensor_z, ideal / v)
+        theta = np.arctan(ideal / v)
+    else:
+        theta = ideal / v
+        real = -trace_field_angles(prescription, distance, sensor_z, theta)
     good = np.isfinite(real)
-    good[1:] &= np.diff(real) > 0.0
+    rising = np.ones_like(good)
+    rising[1:] = np.diff(real) > 0.0
+    good &= rising
     # The valid field is the prefix up to the first failed ray or the first non-increase.
     end = int(np.argmin(good)) if not good.all() else samples
-    return RadialMap(ideal[:end], real[:end])
+    folded = end < samples and bool(np.isfinite(real[end])) and not rising[end]
+    return RadialMap(ideal[:end], real[:end], theta[:end], folded)
+
+
+def _projected(theta: FloatArray, projection: str) -> FloatArray:
+    """Return the normalised ideal radius of field angles: tan(theta) or theta."""
+    if projection == 'pinhole':
+        with np.errstate(invalid='ignore'):
+            return np.tan(np.minimum(theta, math.radians(PINHOLE_MAX_FIELD_DEG)))
+    return np.asarray(theta, dtype=np.float64)
 
 
 def _boundary_points(w: int, h: int, per_side: int = 64) -> FloatArray:
@@ -435,34 +512,200 @@ def _boundary_points(w: int, h: int, per_side: int = 64) -> FloatArray:
     ])
 
 
-def _fit_equivalent_d(curve: RadialMap, v: float, limit_ideal_mm: float,
-                      pixel_mm: float) -> tuple[tuple[float, ...], str, float]:
-    """Fit plumb_bob (or rational_polynomial) to the curve up to ``limit_ideal_mm``."""
-    keep = (curve.ideal_mm > 0.0) & (curve.ideal_mm <= limit_ideal_mm)
-    r_u = curve.ideal_mm[keep] / v
-    r_d = curve.real_mm[keep] / v
-    if r_u.size < 8:
-        return (0.0,) * 5, 'plumb_bob', 0.0
-    to_px = v / pixel_mm
-    r2 = r_u * r_u
-    powers = np.stack([r2, r2 * r2, r2 * r2 * r2], axis=1)
-    # plumb_bob: r_d - r_u = r_u (k1 r^2 + k2 r^4 + k3 r^6), residuals scaled to pixels.
-    a = r_u[:, None] * powers
-    k, *_ = np.linalg.lstsq(a * to_px, (r_d - r_u) * to_px, rcond=None)
-    rms = float(np.sqrt(np.mean(((a @ k) - (r_d - r_u)) ** 2)) * to_px)
-    plumb = (float(k[0]), float(k[1]), 0.0, 0.0, float(k[2]))
-    if rms <= PLUMB_BOB_MAX_RMS_PX:
-        return plumb, 'plumb_bob', rms
-    # rational: r_d - r_u = r_u (k1 r^2 + k2 r^4 + k3 r^6) - r_d (k4 r^2 + k5 r^4 + k6 r^6).
-    b = np.hstack([r_u[:, None] * powers, -r_d[:, None] * powers])
-    c, *_ = np.linalg.lstsq(b * to_px, (r_d - r_u) * to_px, rcond=None)
-    num = r_u * (1.0 + powers @ c[:3])
-    den = 1.0 + powers @ c[3:]
-    rational_rms = float(np.sqrt(np.mean((num / den - r_d) ** 2)) * to_px)
-    if not rational_rms < rms:
-        return plumb, 'plumb_bob', rms
-    return ((float(c[0]), float(c[1]), 0.0, 0.0, float(c[2]),
-             float(c[3]), float(c[4]), float(c[5])), 'rational_polynomial', rational_rms)
+#: The equivalent calibration is the simplest model whose largest displacement error over
+#: the raw image is at most this (px); when none reaches it, the one with the smallest.
+EQUIVALENT_MAX_ERROR_PX = 0.05
+#: Consumer models in order of preference: the most widely read first (plumb_bob and
+#: rational_polynomial are read by every ROS consumer, equidistant by cv2.fisheye-based
+#: ones: image_geometry C++, Isaac ROS; ROS's Python image_geometry has no fisheye support).
+EQUIVALENT_MODELS = ('plumb_bob', 'rational_polynomial', 'equidistant')
+#: Samples of the fit and reweighting passes of the minimax (Lawson) refinement.
+FIT_SAMPLES = 256
+LAWSON_PASSES = 12
+
+
+@dataclass(frozen=True)
+class EquivalentFit:
+    """One fitted consumer model: coefficients and its errors over the raw image (px)."""
+
+    distortion_model: str
+    D: tuple[float, ...]
+    max_error_px: float
+    rms_error_px: float
+
+
+def equivalent_radius(distortion_model: str, D: tuple[float, ...] | FloatArray,
+                      theta: FloatArray) -> FloatArray:
+    """
+    Return the distorted normalised radius a consumer model gives a field angle.
+
+    plumb_bob: r = t (1 + k1 t^2 + k2 t^4 + k3 t^6), t = tan(theta); rational_polynomial:
+    r = t (1 + k1 t^2 + k2 t^4 + k3 t^6) / (1 + k4 t^2 + k5 t^4 + k6 t^6); equidistant
+    (Kannala-Brandt, as cv2.fisheye): r = theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 +
+    k4 theta^8). The pinhole models are NaN from 90 deg.
+
+    :param distortion_model: one of :data:`EQUIVALENT_MODELS`.
+    :param D: the coefficients in camera_info order.
+    :param theta: field angles, rad.
+    :return: radii in normalised (x/f) units.
+    """
+    theta = np.asarray(theta, dtype=np.float64)
+    d = [float(x) for x in D]
+    if distortion_model == 'equidistant':
+        t2 = theta * theta
+        return theta * (1.0 + t2 * (d[0] + t2 * (d[1] + t2 * (d[2] + t2 * d[3]))))
+    with np.errstate(invalid='ignore', over='ignore'):
+        t = np.where(theta < 0.5 * math.pi, np.tan(theta), np.nan)
+        r2 = t * t
+        num = 1.0 + r2 * (d[0] + r2 * (d[1] + r2 * d[4]))
+        if distortion_model == 'rational_polynomial':
+            num = num / (1.0 + r2 * (d[5] + r2 * (d[6] + r2 * d[7])))
+        return t * num
+
+
+@functools.lru_cache(maxsize=8)
+def _raw_probe_points(width: int, height: int) -> FloatArray:
+    """Return the raw pixels the consumer error is measured on: edges, corners and a grid."""
+    xs = np.linspace(-0.5, width - 0.5, 41)
+    ys = np.linspace(-0.5, height - 0.5, 31)
+    grid = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+    return np.concatenate([_boundary_points(width, height), grid])
+
+
+def fit_equivalent(field: RadialMap, v: float, K: FloatArray, width: int, height: int,
+                   every: bool = False) -> list[EquivalentFit]:
+    """
+    Fit every consumer model to the traced field and measure it over the raw image.
+
+    The fit is least squares in pixels on FIT_SAMPLES field angles up to the raw image corner
+    (or the end of the field), refined towards the minimax by Lawson's reweighting; the error
+    of a model at a raw pixel is the distance (px) between that pixel and where the model
+    projects the pixel's true (traced) direction, which is what a consumer's rectification map
+    (cv2.initUndistortRectifyMap, cv2.fisheye.initUndistortRectifyMap) is off by there.
+    Raw pixels outside the image circle carry no direction and are skipped.
+
+    :param field: the field traced by angle (``LensModel.field_curve``).
+    :param v: image distance, mm (normalised radius = real / v).
+    :param K: raw camera matrix.
+    :param width: raw width, px.
+    :param height: raw height, px.
+    :param every: fit every model; by default the fits stop at the first model within
+        EQUIVALENT_MAX_ERROR_PX (the one published: the rest would cost rebuild time).
+    :return: one :class:`EquivalentFit` per model fitted, in :data:`EQUIVALENT_MODELS` order.
+    """
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    points = _raw_probe_points(width, height)
+    xn, yn = (points[:, 0] - cx) / fx, (points[:, 1] - cy) / fy
+    rn = np.hypot(xn, yn)
+    theta_p = field.angle_from_real(rn * v)
+    inside = np.isfinite(theta_p)
+    xn, yn, rn, theta_p = xn[inside], yn[inside], rn[inside], theta_p[inside]
+    # Pixels per unit of normalised radius along each probe's direction.
+    with np.errstate(invalid='ignore', divide='ignore'):
+        gain = np.where(rn > 0, np.hypot(xn * fx, yn * fy) / rn, max(fx, fy))
+    limit = float(np.max(theta_p)) if theta_p.size else 0.0
+    theta = np.linspace(0.0, limit, FIT_SAMPLES + 1)[1:]
+    target = np.interp(theta, field.field_angle_rad, field.real_mm) / v
+    scale = max(fx, fy)
+    fits: list[EquivalentFit] = []
+    for name in EQUIVALENT_MODELS:
+        if fits and fits[-1].max_error_px <= EQUIVALENT_MAX_ERROR_PX and not every:
+            break       # the simpler model is chosen: the others are not needed
+        coefficients = _fit_model(name, theta, target, scale)
+        if coefficients is None and name == 'rational_polynomial' and fits[0].D != _zero_d(
+                'plumb_bob') and math.isfinite(fits[0].max_error_px):
+            # A degenerate rational fit (small fields): plumb_bob is its special case.
+            coefficients = fits[0].D + (0.0, 0.0, 0.0)
+        if coefficients is None:
+            fits.append(EquivalentFit(name, _zero_d(name), math.inf, math.inf))
+            continue
+        error = np.abs(equivalent_radius(name, coefficients, theta_p) - rn) * gain
+        error = np.where(np.isfinite(error), error, np.inf)
+        worst = float(np.max(error)) if error.size else 0.0
+        rms = float(np.sqrt(np.mean(error * error))) if error.size else 0.0
+        fits.append(EquivalentFit(name, coefficients, worst, rms))
+    return fits
+
+
+def _zero_d(name: str) -> tuple[float, ...]:
+    return (0.0,) * {'plumb_bob': 5, 'rational_polynomial': 8, 'equidistant': 4}[name]
+
+
+def _fit_model(name: str, theta: FloatArray, target: FloatArray,
+               scale: float) -> tuple[float, ...] | None:
+    """Fit one model to r(theta) = target (normalised); None where it cannot represent it."""
+    if theta.size < 8:
+        return _zero_d(name)
+    if name == 'equidistant':
+        t2 = theta * theta
+        basis = theta[:, None] * np.stack([t2, t2 ** 2, t2 ** 3, t2 ** 4], axis=1)
+        rhs = target - theta
+    else:
+        if not theta[-1] < math.radians(89.0):
+            return None     # a pinhole model cannot reach 90 deg (tan is infinite)
+        t = np.tan(theta)
+        r2 = t * t
+        powers = np.stack([r2, r2 * r2, r2 * r2 * r2], axis=1)
+        basis = t[:, None] * powers
+        rhs = target - t
+        if name == 'rational_polynomial':
+            # r (1 + den) = t (1 + num): linear in (num, den) (equation error, reweighted by
+            # the denominator below so the residual is the radius error).
+            basis = np.hstack([basis, -target[:, None] * powers])
+    # Columns scaled to unit norm (the powers of small radii are tiny and nearly collinear).
+    norms = np.linalg.norm(basis, axis=0)
+    norms = np.where(norms > 0, norms, 1.0)
+    basis = basis / norms
+    weights = np.ones(theta.size)
+    row_scale = np.ones(theta.size)
+    best, best_error = None, math.inf
+    for _ in range(LAWSON_PASSES):
+        w = np.sqrt(weights) * row_scale * scale
+        coef, *_ = np.linalg.lstsq(basis * w[:, None], rhs * w, rcond=None)
+        if not np.all(np.isfinite(coef)):
+            break
+        if name == 'rational_polynomial':
+            den = 1.0 + powers @ (coef[3:] / norms[3:])
+            if not np.all(den > 0):
+                break
+            row_scale = 1.0 / den
+        residual = np.abs(basis @ coef - rhs) * row_scale
+        worst = float(np.max(residual))
+        if worst * scale <= 0.5 * EQUIVALENT_MAX_ERROR_PX:
+            best = coef / norms
+            break       # well within the bound: the minimax refinement is not needed
+        if worst < best_error:
+            if worst > 0.98 * best_error and best is not None:
+                best = coef / norms
+                break   # Lawson has converged (under 2 % gained)
+            best, best_error = coef / norms, worst
+        total = float(np.sum(weights * residual))
+        if not total > 0:
+            break
+        # Lawson: weight each sample by its share of the error (towards the minimax fit).
+        weights = np.maximum(weights * residual / total * theta.size, 1e-12)
+    if best is None:
+        return None
+    coef = best
+    c = [float(x) for x in coef]
+    if name == 'plumb_bob':
+        return (c[0], c[1], 0.0, 0.0, c[2])
+    if name == 'rational_polynomial':
+        return (c[0], c[1], 0.0, 0.0, c[2], c[3], c[4], c[5])
+    return tuple(c)
+
+
+def choose_equivalent(fits: list[EquivalentFit]) -> EquivalentFit:
+    """
+    Return the first model (in preference order) within EQUIVALENT_MAX_ERROR_PX, else the best.
+
+    :param fits: from :func:`fit_equivalent`.
+    :return: the chosen fit.
+    """
+    for fit in fits:
+        if fit.max_error_px <= EQUIVALENT_MAX_ERROR_PX:
+            return fit
+    return min(fits, key=lambda fit: fit.max_error_px)
 
 
 def _scale_k(boundary_ideal: FloatArray, disk: float, half_w: float, half_h: float,
@@ -529,14 +772,20 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0) -> L
     fx, fy = v / px, v / py
     K = np.array([[fx, 0.0, (w - 1) / 2.0], [0.0, fy, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
 
-    # Pass 1: trace far enough to cover the raw image (edge, not pixel centre) and find K_new.
+    projection = str(vals['output.projection'])
+    cap = _field_cap_rad(distance)
+
+    # Pass 1: trace the field by angle (theta uniform) far enough to cover the raw image (its
+    # edge, not the pixel centre), or to the end of the field the lens passes.
     edge_real = math.hypot(w / 2.0 * px, h / 2.0 * py)
-    ideal_max = 1.5 * edge_real
+    theta_max = min(cap, 1.5 * edge_real / v)
     for _ in range(12):
-        coarse = _trace_curve(prescription, distance, sensor_z, v, ideal_max, 1024)
-        if coarse.ideal_mm.size < 1024 or coarse.valid_real_mm >= 1.05 * edge_real:
+        coarse = _trace_curve(prescription, distance, sensor_z, v, theta_max * v, 1024,
+                              'equidistant')
+        if (coarse.ideal_mm.size < 1024 or coarse.valid_real_mm >= 1.05 * edge_real
+                or theta_max >= cap):
             break
-        ideal_max *= 2.0
+        theta_max = min(cap, 2.0 * theta_max)
     if coarse.ideal_mm.size == 0:
         raise ModelError(_lens_param(vals), 'not even the axial ray passes through this lens: '
                                             'a surface misses it or reflects it totally')
@@ -551,31 +800,42 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0) -> L
     bx = (boundary[:, 0] - K[0, 2]) * px
     by = (boundary[:, 1] - K[1, 2]) * py
     b_real = np.hypot(bx, by)
-    b_ideal = coarse.ideal_from_real(np.minimum(b_real, coarse.valid_real_mm))
-    ratio = b_ideal / b_real / v
+    b_theta = coarse.angle_from_real(np.minimum(b_real, coarse.valid_real_mm))
+    ratio = _projected(b_theta, projection) / b_real
     boundary_ideal = np.stack([bx * ratio, by * ratio], axis=1)
-    disk = coarse.valid_ideal_mm / v
+    disk = float(_projected(np.array(coarse.max_field_angle_rad), projection))
     k = _scale_k(boundary_ideal, disk, ow / 2.0, oh / 2.0, fx, fy, float(vals['output.alpha']))
     K_new = np.array([[k * fx, 0.0, (ow - 1) / 2.0], [0.0, k * fy, (oh - 1) / 2.0],
                       [0.0, 0.0, 1.0]])
 
-    # Pass 2: the dense curve from 0 to just past the output corner (and the raw image edge).
+    # Pass 2: the dense curve in the output projection from 0 to just past the output corner
+    # (and the raw image edge).
     out_corner = math.hypot(ow / 2.0 / (k * fx), oh / 2.0 / (k * fy)) * v
-    raw_corner_ideal = float(np.nanmax(b_ideal))
-    reach = min(1.02 * max(out_corner, raw_corner_ideal), coarse.valid_ideal_mm * 1.001)
-    curve = _trace_curve(prescription, distance, sensor_z, v, reach, CURVE_SAMPLES)
+    raw_corner_ideal = float(np.nanmax(ratio * b_real)) * v
+    reach = min(1.02 * max(out_corner, raw_corner_ideal), disk * v * 1.001)
+    curve = _trace_curve(prescription, distance, sensor_z, v, reach, CURVE_SAMPLES, projection)
 
-    D, dist_model, rms = _fit_equivalent_d(curve, v, raw_corner_ideal, min(px, py))
+    fits = fit_equivalent(coarse, v, K, w, h)
+    chosen = choose_equivalent(fits)
     disp = (boundary_ideal * v - np.stack([bx, by], axis=1)) / np.array([px, py])
     max_disp = float(np.nanmax(np.hypot(disp[:, 0], disp[:, 1])))
 
     model = LensModel(
         values=vals, prescription=prescription, width=w, height=h, out_width=ow,
         out_height=oh, pixel_mm=(px, py), focal_length_mm=f, image_distance_mm=v, curve=curve,
-        K=K, K_new=K_new, D=D, distortion_model=dist_model, fit_rms_px=rms,
+        K=K, K_new=K_new, D=chosen.D, distortion_model=chosen.distortion_model,
+        fit_rms_px=chosen.rms_error_px, equivalent_max_error_px=chosen.max_error_px,
+        equivalent_fits=tuple(fits),
         max_displacement_px=max_disp,
-        interpolation=CV_INTERPOLATION[str(vals['output.interpolation'])])
+        interpolation=CV_INTERPOLATION[str(vals['output.interpolation'])],
+        projection=projection, field_curve=coarse)
     return model
+
+
+def _field_cap_rad(distance: float) -> float:
+    """Return the largest field angle traced for a scene at ``distance`` (rad)."""
+    return math.radians(MAX_FIELD_DEG_INFINITE if math.isinf(distance)
+                        else MAX_FIELD_DEG_FINITE)
 
 
 def _lens_param(values: Mapping[str, Any]) -> str:
@@ -673,6 +933,11 @@ def _summary(model: LensModel) -> dict[str, Any]:
     if not near <= distance <= far:
         warnings.append(f'scene distance {distance:g} mm is outside the depth of field '
                         f'[{near:.4g}, {far:.4g}] mm of the focus distance {focus:g} mm')
+    field = _full_field(model)
+    if field['folded']:
+        warnings.append(f"the real image height folds back at {field['max_field_angle_deg']:.4g} "
+                        f"deg (r = {field['image_circle_radius_mm']:.4g} mm): the valid field "
+                        'ends before the fold')
     if model.curve.valid_real_mm < edge_real:
         warnings.append(f'the valid field ends at {model.curve.valid_real_mm:.4g} mm, inside '
                         f'the sensor half-diagonal {edge_real:.4g} mm: corners stay black')
@@ -705,8 +970,93 @@ def _summary(model: LensModel) -> dict[str, Any]:
         'focus_distance_mm': _finite_or_none(focus),
         'depth_of_field_mm': {'near': near, 'far': _finite_or_none(far)},
         'valid_field_mm': model.curve.valid_real_mm,
+        'projection': model.projection,
+        'max_field_angle_deg': field['max_field_angle_deg'],
+        'covered_field': _covered_field(model, field),
+        '_field_curve': field,
         'corner_sigma_px': corner_sigma,
         'warnings': warnings,
+    }
+
+
+#: Samples of the whole-field trace (the lens's own limit, for the report).
+FULL_FIELD_SAMPLES = 256
+
+
+def _full_field(model: LensModel) -> dict[str, Any]:
+    """
+    Return the chief-ray curve over the whole field the lens passes, to its limit.
+
+    When the model's angle-uniform trace (``field_curve``) already ends inside its range (a
+    failed ray or a fold), that is the limit. Otherwise the field is traced from 0 to the cap
+    (179 deg at infinity, 89.5 deg for a finite scene), and the last interval refined 64
+    times, so the limit is known to about 0.01 deg.
+    """
+    curve = model.field_curve
+    theta, real, folded = curve.field_angle_rad, curve.real_mm, curve.folded
+    distance = _scene_distance(model.values)
+    cap = _field_cap_rad(distance)
+    if curve.ideal_mm.size == 1024 and curve.max_field_angle_rad < cap:
+        sensor_z, _ = image_plane(model.prescription, distance)
+        grid = np.linspace(0.0, cap, FULL_FIELD_SAMPLES)
+        traced = _trace_angles(model, sensor_z, grid)
+        if traced.ideal_mm.size < FULL_FIELD_SAMPLES:
+            end = traced.ideal_mm.size
+            fine = np.concatenate((np.linspace(0.0, grid[end - 1], 64),
+                                   np.linspace(grid[end - 1], grid[end], 66)[1:]))
+            traced = _trace_angles(model, sensor_z, fine)
+        theta, real, folded = traced.field_angle_rad, traced.real_mm, traced.folded
+    return {'theta_rad': theta, 'real_mm': real, 'folded': folded,
+            'max_field_angle_deg': math.degrees(float(theta[-1])),
+            'at_cap': bool(theta[-1] >= cap * (1.0 - 1e-9)),
+            'image_circle_radius_mm': float(real[-1])}
+
+
+def _trace_angles(model: LensModel, sensor_z: float, theta: FloatArray) -> RadialMap:
+    """Trace the chief rays of the field angles ``theta`` (increasing); keep the valid prefix."""
+    real = -trace_field_angles(model.prescription, _scene_distance(model.values), sensor_z,
+                               theta)
+    good = np.isfinite(real)
+    rising = np.ones_like(good)
+    rising[1:] = np.diff(real) > 0.0
+    good &= rising
+    end = int(np.argmin(good)) if not good.all() else theta.size
+    folded = end < theta.size and bool(np.isfinite(real[end])) and not rising[end]
+    return RadialMap(theta[:end] * model.image_distance_mm, real[:end], theta[:end], folded)
+
+
+def _covered_field(model: LensModel, field: Mapping[str, Any]) -> dict[str, Any]:
+    """Return the field the raw image and the corrected image cover, in degrees."""
+    theta, real = field['theta_rad'], field['real_mm']
+    circle = field['image_circle_radius_mm']
+
+    def angle(radius_mm: float) -> float | None:
+        if not radius_mm <= circle:
+            return None
+        return math.degrees(float(np.interp(radius_mm, real, theta)))
+
+    half_w = model.width / 2.0 * model.pixel_mm[0]
+    half_h = model.height / 2.0 * model.pixel_mm[1]
+    corner = math.hypot(half_w, half_h)
+    ideal = math.hypot(model.out_width / 2.0 / model.K_new[0, 0],
+                       model.out_height / 2.0 / model.K_new[1, 1]) * model.image_distance_mm
+    curve = model.curve
+    out_corner = (math.degrees(float(np.interp(ideal, curve.ideal_mm, curve.field_angle_rad)))
+                  if ideal <= curve.valid_ideal_mm else None)
+
+    def full(half: float | None) -> float | None:
+        return None if half is None else 2.0 * half
+
+    return {
+        'max_field_angle_deg': field['max_field_angle_deg'],
+        'max_field_is_trace_limit': field['at_cap'],
+        'image_circle_radius_mm': circle,
+        'corners_covered': corner <= circle,
+        'corner_field_angle_deg': angle(corner),
+        'horizontal_deg': full(angle(half_w)),
+        'vertical_deg': full(angle(half_h)),
+        'diagonal_deg': full(angle(corner)),
+        'output_corner_field_angle_deg': out_corner,
     }
 
 
@@ -722,15 +1072,17 @@ def _corner_sigma_px(model: LensModel, vals: Mapping[str, Any], nominal: Mapping
     corner = np.array([[model.width - 1.0, model.height - 1.0]])
     x_mm = (corner[0, 0] - model.K[0, 2]) * model.pixel_mm[0]
     y_mm = (corner[0, 1] - model.K[1, 2]) * model.pixel_mm[1]
-    ideal = float(model.curve.ideal_from_real(np.array(math.hypot(x_mm, y_mm))))
-    if not math.isfinite(ideal):
+    theta = float(model.field_curve.angle_from_real(np.array(math.hypot(x_mm, y_mm))))
+    if not math.isfinite(theta):
         return math.nan
-    tan_field = np.array([ideal / model.image_distance_mm])
+    # A ladder of angles up to the corner: a wide-angle lens's chief ray is aimed by
+    # continuation from the smaller angles (raytrace._aim_continued).
+    ladder = theta * np.array([0.25, 0.5, 0.75, 1.0])
 
     def height(p: Mapping[str, float]) -> float:
         lens = make_prescription(_with(vals, p))
         z, _ = image_plane(lens, distance)
-        return float(-trace_chief_rays(lens, distance, z, tan_field)[0])
+        return float(-trace_field_angles(lens, distance, z, ladder)[-1])
 
     return _sigma_or_nan(height, nominal, sigmas) / min(model.pixel_mm)
 

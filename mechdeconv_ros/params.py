@@ -166,6 +166,11 @@ SCHEMA: tuple[ParamSpec, ...] = (
     _d('output.alpha', 0.0, '1',
        'Scale of the corrected image as in getOptimalNewCameraMatrix: 0 keeps only valid pixels '
        '(no black border), 1 keeps every source pixel in view.', 0.0, 1.0),
+    ParamSpec('output.projection', 'string', 'pinhole', '',
+              'Projection of the corrected image: pinhole (rectilinear, r = f tan(theta), at '
+              'most 85 deg off axis) or equidistant (ideal fisheye, r = f theta, any field; '
+              'camera_info_rect then says distortion_model equidistant with D = 0).',
+              choices=PROJECTIONS),
     ParamSpec('output.interpolation', 'string', 'linear', '',
               'Interpolation of the remap: nearest, linear, cubic or lanczos4. Depth images '
               '(16UC1, 32FC1) always use nearest.', choices=INTERPOLATIONS),

@@ -97,6 +97,9 @@ MAX_START_HALVINGS = 12
 STALL_ITERATIONS = 3
 #: Windows of ray aiming continued from solved neighbours (wide fields, see _aim_continued).
 CONTINUATION_PASSES = 64
+#: Step halvings of the first pass from the paraxial starts: a ray that needs more is aimed
+#: again by continuation from its solved neighbours (cheaper than halving on).
+FIRST_PASS_HALVINGS = 8
 #: Newton iterations and step halvings from an extrapolated start (it is close: few needed).
 CONTINUATION_ITERATIONS = 12
 CONTINUATION_HALVINGS = 8
@@ -631,7 +634,7 @@ def _aim_continued(problem: _ChiefRayProblem, field: np.ndarray) -> np.ndarray:
     every ray of a window converges), until a sample fails from an extrapolated start too: the
     branch of chief rays that starts on the axis ends there.
     """
-    height = _aim(problem, field)
+    height = _aim(problem, field, None, MAX_AIM_ITERATIONS, FIRST_PASS_HALVINGS)
     for sign in (1.0, -1.0):
         side = np.flatnonzero((field * sign > 0) & np.isfinite(field))
         order = side[np.argsort(np.abs(field[side]), kind='stable')]

@@ -214,7 +214,7 @@ def _stub_model() -> SimpleNamespace:
     return SimpleNamespace(
         width=640, height=480, out_width=800, out_height=600, K=k, K_new=k_new,
         D=(-0.1, 0.01, 0.0, 0.0, -0.001), distortion_model='plumb_bob',
-        P=np.hstack([k_new, np.zeros((3, 1))]))
+        P=np.hstack([k_new, np.zeros((3, 1))]), projection='pinhole')
 
 
 def test_camera_info_raw_describes_the_raw_camera() -> None:
@@ -237,6 +237,17 @@ def test_camera_info_rect_describes_the_corrected_image() -> None:
     npt.assert_allclose(info.k, model.K_new.ravel())
     npt.assert_allclose(np.reshape(info.p, (3, 4))[:, :3], np.reshape(info.k, (3, 3)))
     npt.assert_allclose(info.r, np.eye(3).ravel())
+
+
+def test_camera_info_rect_of_an_equidistant_output_is_an_ideal_fisheye() -> None:
+    model = _stub_model()
+    model.projection = 'equidistant'
+    info = fill_camera_info(CameraInfo(), model, rectified=True)  # type: ignore[arg-type]
+    assert info.distortion_model == 'equidistant'
+    npt.assert_array_equal(info.d, np.zeros(4))
+    npt.assert_allclose(info.k, model.K_new.ravel())
+    raw = camera_info_from_model(model, rectified=False)  # type: ignore[arg-type]
+    assert raw.distortion_model == 'plumb_bob'
 
 
 def test_camera_info_rational_polynomial_keeps_eight_coefficients() -> None:

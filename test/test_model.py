@@ -180,21 +180,10 @@ def test_rational_model_when_plumb_bob_misses():
     model = build_model({'sensor.width_px': 3840, 'sensor.height_px': 2160})
     assert model.distortion_model == 'rational_polynomial'
     assert len(model.D) == 8
-    plumb_rms = _plumb_rms(model)
-    assert model.fit_rms_px < plumb_rms
-
-
-def _plumb_rms(model):
-    from mechdeconv_ros.model import _fit_equivalent_d
-    curve = model.curve
-    keep = curve.ideal_mm > 0
-    r = curve.ideal_mm[keep] / model.image_distance_mm
-    d = curve.real_mm[keep] / model.image_distance_mm
-    a = (r[:, None] * np.stack([r ** 2, r ** 4, r ** 6], axis=1))
-    k, *_ = np.linalg.lstsq(a, d - r, rcond=None)
-    assert _fit_equivalent_d  # the function under test is the model's own
-    return float(np.sqrt(np.mean((a @ k - (d - r)) ** 2)) * model.image_distance_mm
-                 / min(model.pixel_mm))
+    fits = {fit.distortion_model: fit for fit in model.equivalent_fits}
+    assert fits['plumb_bob'].max_error_px > 0.05
+    assert model.equivalent_max_error_px == fits['rational_polynomial'].max_error_px <= 0.05
+    assert model.fit_rms_px < fits['plumb_bob'].rms_error_px
 
 
 def test_stop_offset_changes_the_distortion():

@@ -438,6 +438,22 @@ BAD_SETS = [
      'one per surface'),
     ('output-too-big', (Parameter('output.width_px', Parameter.Type.INTEGER, 16384),
                         Parameter('output.height_px', Parameter.Type.INTEGER, 16384)), 'Mpx'),
+    ('projection-bogus', (Parameter('output.projection', Parameter.Type.STRING,
+                                    'stereographic'),), 'output.projection'),
+    ('asphere-length', (
+        Parameter('lens.surfaces.radius_mm', Parameter.Type.DOUBLE_ARRAY, [4.0, -4.0]),
+        Parameter('lens.surfaces.thickness_mm', Parameter.Type.DOUBLE_ARRAY, [3.0, 0.0]),
+        Parameter('lens.surfaces.refractive_index', Parameter.Type.DOUBLE_ARRAY, [1.5, 1.0]),
+        Parameter('lens.surfaces.asphere_a4', Parameter.Type.DOUBLE_ARRAY, [1e-4] * 3)),
+     'lens.surfaces.asphere_a4'),
+    # k = 5 on r = 4 mm: the sag is defined only to r = 1.63 mm, inside the 3 mm semi-diameter.
+    ('conic-undefined', (
+        Parameter('lens.surfaces.radius_mm', Parameter.Type.DOUBLE_ARRAY, [4.0, -4.0]),
+        Parameter('lens.surfaces.thickness_mm', Parameter.Type.DOUBLE_ARRAY, [3.0, 0.0]),
+        Parameter('lens.surfaces.refractive_index', Parameter.Type.DOUBLE_ARRAY, [1.5, 1.0]),
+        Parameter('lens.surfaces.semi_diameter_mm', Parameter.Type.DOUBLE_ARRAY, [3.0, 3.0]),
+        Parameter('lens.surfaces.conic', Parameter.Type.DOUBLE_ARRAY, [5.0, 0.0])),
+     'lens.surfaces.conic'),
 ]
 
 
@@ -518,6 +534,57 @@ def test_double_array_parameters_can_be_set_and_cleared(harness: Harness,
     finally:
         cleared = harness.client.set_parameters_atomically(
             *(Parameter(k, Parameter.Type.DOUBLE_ARRAY, []) for k in prescription))
+        assert cleared.successful, cleared.reason
+    model = expected_model(harness.values, width, height)
+    assert_camera_infos(_exchange_until_model(harness, outputs, msg, model), model)
+
+
+def test_aspheric_prescription_and_equidistant_output_rebuild(
+        harness: Harness, outputs: Outputs) -> None:
+    width, height = SMALL
+    src = test_pattern(width, height)
+    msg = make_image(src, 'mono8')
+    change = {
+        'lens.surfaces.radius_mm': [4.0, -4.0],
+        'lens.surfaces.thickness_mm': [3.0, 0.0],
+        'lens.surfaces.refractive_index': [1.5168, 1.0],
+        'lens.surfaces.conic': [-0.5, 0.0],
+        'lens.surfaces.asphere_a4': [0.0, 2e-3],
+    }
+    params = [Parameter(k, Parameter.Type.DOUBLE_ARRAY, v) for k, v in change.items()]
+    params.append(Parameter('output.projection', Parameter.Type.STRING, 'equidistant'))
+    result = harness.client.set_parameters_atomically(*params)
+    assert result.successful, result.reason
+    try:
+        values = dict(harness.values, **change, **{'output.projection': 'equidistant'})
+        model = expected_model(values, width, height)
+        assert model.prescription.surfaces[1].asphere[0] == 2e-3
+        got = _exchange_until_model(
+            harness, outputs, msg, model,
+            check=lambda r: r['info_rect'].distortion_model == 'equidistant')
+        rect = got['info_rect']
+        assert rect.distortion_model == 'equidistant'
+        npt.assert_array_equal(rect.d, np.zeros(4))
+        npt.assert_allclose(rect.k, model.K_new.ravel(), rtol=1e-9)
+        assert got['info'].distortion_model == model.distortion_model
+        image, _ = image_to_array(got['image'])
+        npt.assert_array_equal(image, Rectifier(model).correct(src))
+        # The covered field and the equivalent calibration's error reach /diagnostics.
+        deadline = time.monotonic() + 5.0
+        diag = harness.diag()
+        while diag.get('projection') != 'equidistant' and time.monotonic() < deadline:
+            diag = harness.diag()
+        report = model.report()
+        npt.assert_allclose(float(diag['max_field_angle_deg']), report['max_field_angle_deg'],
+                            rtol=1e-5)
+        npt.assert_allclose(float(diag['equivalent_max_error_px']),
+                            report['equivalent_max_error_px'], rtol=1e-4, atol=1e-9)
+        assert diag['projection'] == 'equidistant'
+        assert 'covered_field.image_circle_radius_mm' in diag
+    finally:
+        restore = [Parameter(k, Parameter.Type.DOUBLE_ARRAY, []) for k in change]
+        restore.append(Parameter('output.projection', Parameter.Type.STRING, 'pinhole'))
+        cleared = harness.client.set_parameters_atomically(*restore)
         assert cleared.successful, cleared.reason
     model = expected_model(harness.values, width, height)
     assert_camera_infos(_exchange_until_model(harness, outputs, msg, model), model)

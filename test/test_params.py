@@ -38,8 +38,8 @@ def test_issue_contract_names_are_declared():
     # Issue 14: the vignetting correction.
     contract += ['output.vignetting_correction', 'output.max_vignetting_gain']
     # Issue 11: aspheric surfaces.
-    contract += ['lens.surfaces.conic'] + [f'lens.surfaces.asphere_a{p}'
-                                           for p in (4, 6, 8, 10, 12, 14, 16)]
+    contract += ['lens.surfaces.conic', 'output.projection'] + [
+        f'lens.surfaces.asphere_a{p}' for p in (4, 6, 8, 10, 12, 14, 16)]
     assert set(contract) <= set(params.SPECS)
     assert set(contract) == set(params.MODEL_PARAMS)
 

@@ -448,6 +448,8 @@ def hostile_attempts() -> list[Attempt]:
                  'lanczos8', '\x00', 'x' * 1000):
         add('unknown choice', [param_msg('output.interpolation', text,
                                          Parameter.Type.STRING)])
+    for text in ('', 'fisheye', 'Equidistant', 'stereographic', 'pinhole ', '\x00'):
+        add('unknown choice', [param_msg('output.projection', text, Parameter.Type.STRING)])
     # Sets the schema allows field by field but that describe no camera.
     model_level = [
         ('not glass', {'lens.refractive_index': 1.0}, ('lens.refractive_index',)),
@@ -471,6 +473,16 @@ def hostile_attempts() -> list[Attempt]:
          ('lens.surfaces.refractive_index',)),
         ('stop surface beyond the lens', dict(prescription(2), **{'lens.stop_surface': 7}),
          ('lens.stop_surface',)),
+        ('asphere array of the wrong length',
+         dict(prescription(2), **{'lens.surfaces.asphere_a6': [1e-4] * 3}),
+         ('lens.surfaces.asphere_a6',)),
+        ('conic array of the wrong length', dict(prescription(4), **{'lens.surfaces.conic':
+                                                                     [-1.0]}),
+         ('lens.surfaces.conic',)),
+        ('conic leaves the sag undefined inside the semi-diameter',
+         dict(prescription(2), **{'lens.surfaces.semi_diameter_mm': [3.0, 3.0],
+                                  'lens.surfaces.conic': [5.0, 0.0]}),
+         ('lens.surfaces.conic',)),
     ]
     for category, change, blame in model_level:
         messages = [param_msg(k, v, Parameter.Type.DOUBLE_ARRAY if isinstance(v, list)
