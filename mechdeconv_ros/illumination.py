@@ -69,6 +69,9 @@ FloatArray = npt.NDArray[np.float64]
 #: (linear interpolation between them: at the kink where a rim starts to clip it errs by
 #: about 0.1 percentage point on the lenses of the tests).
 RI_SAMPLES = 48
+#: A drop of RI by more than CLIFF between two heights gets CLIFF_SAMPLES heights inside.
+CLIFF = 0.1
+CLIFF_SAMPLES = 15
 #: Samples of the meridional (k_x = 0) scan of each height over k_y in (-1, 1).
 SCAN_SAMPLES = 128
 #: Rows of the k_y integration, the most root-finding steps of an edge and the change of its
@@ -87,7 +90,8 @@ class Illumination:
     """
     The traced relative illumination over the real sensor radius.
 
-    ``height_mm`` is uniform from 0; ``ri`` is 1 on the axis; ``pupil_pass_fraction`` is
+    ``height_mm`` increases from 0 (uniform, denser where RI falls off a cliff); ``ri`` is 1
+    on the axis; ``pupil_pass_fraction`` is
     None when it was not asked for. ``corner_height_mm`` is the real radius of the raw image's
     corner pixel centre, ``corner_ri`` the RI there.
     """
@@ -140,7 +144,8 @@ def stop_of(values: Mapping[str, Any]) -> tuple[float, int | None]:
 
 
 def backward_system(prescription: Prescription, stop_radius_mm: float,
-                    stop_surface: int | None, sensor_z_mm: float) -> System:
+                    stop_surface: int | None, sensor_z_mm: float,
+                    scene_at_infinity: bool = False) -> System:
     """
     Return the lens mirrored about the sensor plane: backward rays start at z' = 0.
 
@@ -148,10 +153,13 @@ def backward_system(prescription: Prescription, stop_radius_mm: float,
     :param stop_radius_mm: clear radius of the stop.
     :param stop_surface: surface carrying the stop, None for a stop plane.
     :param sensor_z_mm: the sensor plane.
+    :param scene_at_infinity: a ray leaving the front surface in any direction reaches the
+        scene (past 90 deg for a fisheye); at a finite distance it must head for the object
+        plane.
     :return: the mirrored system (:func:`mechdeconv_ros.trace3d.reversed_system`).
     """
     system = lens_system(prescription, stop_radius_mm, stop_surface)
-    return reversed_system(system, sensor_z_mm)
+    return reversed_system(system, sensor_z_mm, scene_at_infinity)
 
 
 def _margin(system: System, height: FloatArray, kx: FloatArray, ky: FloatArray) -> np.ndarray:
@@ -303,7 +311,8 @@ def relative_illumination(model: Any, *, samples: int = RI_SAMPLES,
     distance = float(values['scene.distance_mm'])
     distance = math.inf if distance == 0.0 else distance
     sensor_z, _ = image_plane(model.prescription, distance)
-    system = backward_system(model.prescription, radius, surface, sensor_z)
+    system = backward_system(model.prescription, radius, surface, sensor_z,
+                             math.isinf(distance))
     px, py = model.pixel_mm
     corner = math.hypot((model.width - 1) / 2.0 * px, (model.height - 1) / 2.0 * py)
     edge = math.hypot(model.width / 2.0 * px, model.height / 2.0 * py)
@@ -312,6 +321,17 @@ def relative_illumination(model: Any, *, samples: int = RI_SAMPLES,
     if not area[0] > 0:
         raise ValueError('no ray from the scene reaches the centre of the sensor: the stop '
                          'or a semi-diameter blocks the axial beam')
+    # A cliff (a whole beam clipped within one step, e.g. at a fisheye's design field, where
+    # the front rim cuts every ray at once): trace 15 heights inside each such interval.
+    cliffs = np.flatnonzero(area[:-1] - area[1:] > CLIFF * area[0])
+    if cliffs.size:
+        inner = (np.arange(1, CLIFF_SAMPLES + 1) / (CLIFF_SAMPLES + 1))[None, :]
+        extra = (heights[cliffs, None] + inner * (heights[cliffs + 1] - heights[cliffs])[:, None]
+                 ).ravel()
+        heights = np.concatenate((heights, extra))
+        area = np.concatenate((area, beam_area(system, extra)))
+        order = np.argsort(heights)
+        heights, area = heights[order], area[order]
     ri = area / area[0]
     fraction = None
     if with_fraction:
@@ -533,7 +553,8 @@ def stop_flux(prescription: Prescription, stop_radius_mm: float, stop_surface: i
     sensor_z, _ = image_plane(prescription, object_distance_mm)
     j = next(i for i, e in enumerate(system.elements) if e.is_stop)
     stop = system.elements[j]
-    front = reversed_system(System(system.elements[:j]), stop.z_mm)
+    front = reversed_system(System(system.elements[:j]), stop.z_mm,
+                            math.isinf(object_distance_mm))
     rear = System(system.elements[j if stop.surface is not None else j + 1:])
     n = stop.n_before
     sample_radius = 1.25 * stop_radius_mm

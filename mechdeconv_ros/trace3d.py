@@ -70,14 +70,22 @@ class Element(NamedTuple):
 
 @dataclass(frozen=True)
 class System:
-    """An ordered list of elements, traced forwards (+z)."""
+    """
+    An ordered list of elements, traced forwards (+z).
+
+    ``free_exit``: a ray leaving the last surface may travel in any direction (k_z <= 0
+    too): the backward trace into a scene at infinity, which a fisheye sees past 90 deg.
+    Otherwise every ray must keep k_z > 0 (it must reach the next plane: the sensor, or an
+    object plane at a finite distance).
+    """
 
     elements: tuple[Element, ...]
+    free_exit: bool = False
 
     def without_semi_diameters(self) -> System:
         """Return the system whose only clipping aperture is the stop (edges still clip)."""
         return System(tuple(e._replace(clear_radius_mm=e.clear_radius_mm if e.is_stop else 0.0)
-                            for e in self.elements))
+                            for e in self.elements), self.free_exit)
 
 
 def lens_system(prescription: Prescription, stop_radius_mm: float,
@@ -117,12 +125,14 @@ def _mirror(surface: Surface) -> Surface:
     return dataclasses.replace(surface, **changes)
 
 
-def reversed_system(system: System, z0_mm: float) -> System:
+def reversed_system(system: System, z0_mm: float, free_exit: bool = False) -> System:
     """
     Mirror a system about the plane z = z0 (module docstring), for backward tracing.
 
     :param system: the lens.
     :param z0_mm: the mirror plane, usually the sensor plane (then z' = 0 is the sensor).
+    :param free_exit: rays may leave the (mirrored) last surface in any direction (a scene
+        at infinity behind it).
     :return: the mirrored system, elements in reverse order.
     """
     out = []
@@ -130,7 +140,7 @@ def reversed_system(system: System, z0_mm: float) -> System:
         surface = None if e.surface is None else _mirror(e.surface)
         out.append(Element(float(z0_mm) - e.z_mm, surface, e.n_after, e.n_before,
                            e.clear_radius_mm, e.is_stop))
-    return System(tuple(out))
+    return System(tuple(out), free_exit)
 
 
 def trace_pass(system: System, x: np.ndarray, y: np.ndarray, z: np.ndarray,
@@ -180,8 +190,9 @@ def _trace(system: System, x: np.ndarray, y: np.ndarray, z: np.ndarray,
     bad = ~(kz > 0)
     margin = np.ones(bad.shape)
     first = True
+    last = max((i for i, e in enumerate(system.elements) if e.surface is not None), default=-1)
     with np.errstate(**_ERRSTATE):
-        for e in system.elements:
+        for i, e in enumerate(system.elements):
             z_local = z - e.z_mm
             if e.surface is None:
                 # A stop plane: where the ray's line crosses it, without moving the ray (an
@@ -204,7 +215,7 @@ def _trace(system: System, x: np.ndarray, y: np.ndarray, z: np.ndarray,
                 np.fmin(margin, 1.0 - np.hypot(x, y) / e.clear_radius_mm, out=margin)
             if e.n_before != e.n_after:
                 kx, ky, kz = refract(kx, ky, kz, nx, ny, nz, e.n_before, e.n_after)
-                bad |= ~(kz > 0)
+                bad |= ~np.isfinite(kz) if (system.free_exit and i == last) else ~(kz > 0)
     np.maximum(margin, -1.0, out=margin)
     # A ray that an aperture had clipped before it failed otherwise keeps that (continuous)
     # margin; only a ray whose hard failure is the limit gets FAILED.
