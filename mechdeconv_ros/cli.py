@@ -226,7 +226,7 @@ def cmd_vignetting(args: argparse.Namespace) -> int:
     if args.lensfun:
         fit = lensfun_fit(model, curve)
         print(fit.xml())
-        print(f'<!-- max fit error {fit.max_error_pts:.3g} pts -->')
+        print(fit.comment())
     return 0
 
 

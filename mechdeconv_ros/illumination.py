@@ -472,8 +472,10 @@ class LensfunFit:
     A lensfun ``pa`` vignetting entry: Cd = Cs (1 + k1 r^2 + k2 r^4 + k3 r^6).
 
     r is normalised to the half-diagonal of the image (r = 1 at the corner), as lensfun
-    defines it for vignetting; ``max_error_pts`` is the largest |fit - RI| over r in [0, 1],
-    in percentage points.
+    defines it for vignetting; ``max_error_pts`` is the largest |fit - RI| over r in
+    [0, ``fit_radius``], in percentage points. ``fit_radius`` is 1 unless the light ends
+    inside the image (RI < 1 / ``output.max_vignetting_gain``, or a cliff where a rim cuts
+    the beam, e.g. at a fisheye's image circle), where the polynomial stops being fitted.
     """
 
     k1: float
@@ -483,12 +485,21 @@ class LensfunFit:
     focal_mm: float
     f_number: float
     distance_m: float
+    fit_radius: float = 1.0
 
     def xml(self) -> str:
         """Return the ``<vignetting model="pa" .../>`` element."""
         return (f'<vignetting model="pa" focal="{self.focal_mm:.4g}" '
                 f'aperture="{self.f_number:.3g}" distance="{self.distance_m:.4g}" '
                 f'k1="{self.k1:.6g}" k2="{self.k2:.6g}" k3="{self.k3:.6g}"/>')
+
+    def comment(self) -> str:
+        """Return the fit's error as an XML comment (``max fit error N pts``)."""
+        text = f'max fit error {self.max_error_pts:.3g} pts'
+        if self.fit_radius < 1.0:
+            text += (f' (fitted to r <= {self.fit_radius:.3f}, where the light ends: '
+                     'the image circle or a rim)')
+        return f'<!-- {text} -->'
 
 
 #: lensfun's distance for a scene at infinity (metres): its database uses 1000 for "far".
@@ -502,13 +513,21 @@ def lensfun_fit(model: Any, illumination: Illumination | None = None,
 
     :param model: the lens model (focal length, f-number, scene distance, sensor).
     :param illumination: its curve (default: traced).
-    :param samples: radii, uniform in r from 0 to 1 (the half-diagonal).
+    :param samples: radii, uniform in r from 0 to the fit radius (:class:`LensfunFit`).
     :return: the fit.
     """
     curve = illumination or model.illumination(with_fraction=False)
     half_diagonal = math.hypot(model.width / 2.0 * model.pixel_mm[0],
                                model.height / 2.0 * model.pixel_mm[1])
-    r = np.linspace(0.0, 1.0, samples)
+    floor = 1.0 / float(model.values.get('output.max_vignetting_gain', 4.0))
+    # The fit ends before RI falls below the floor or off a cliff (more than 5 points from
+    # one sample to the next: a rim cutting the beam), which no sixth-order polynomial
+    # follows.
+    drop = np.concatenate(([0.0], curve.ri[:-1] - curve.ri[1:]))
+    dark = np.flatnonzero((curve.ri < floor) | (drop > 0.05))
+    reach = 1.0 if dark.size == 0 else min(1.0, curve.height_mm[max(dark[0] - 1, 0)]
+                                           / half_diagonal)
+    r = np.linspace(0.0, reach, samples)
     ri = curve.at(r * half_diagonal)
     r2 = r * r
     basis = np.stack([r2, r2 * r2, r2 * r2 * r2], axis=1)
@@ -518,62 +537,4 @@ def lensfun_fit(model: Any, illumination: Illumination | None = None,
     summary = model.summary
     return LensfunFit(float(k[0]), float(k[1]), float(k[2]), error,
                       float(model.focal_length_mm), float(summary['f_number']),
-                      distance / 1000.0 if distance > 0 else LENSFUN_INFINITY_M)
-
-
-def stop_flux(prescription: Prescription, stop_radius_mm: float, stop_surface: int | None,
-              object_distance_mm: float, sensor_radius_mm: float, *, bins: int = 8,
-              rays: int = 2_000_000, stop_cosine: float, chunk: int = 250_000,
-              seed: int = 0) -> tuple[FloatArray, FloatArray]:
-    """
-    Count the flux through the stop onto the sensor, ray by ray (reference for wide fields).
-
-    Rays are spread uniformly (a randomly shifted R_4 sequence) over the stop's vertex plane
-    (a disk 1.25 x the stop radius) and over the direction cosines of the medium there
-    (|k| <= ``stop_cosine``): every ray carries the same etendue n^2 dA dk_x dk_y, conserved
-    to the sensor. Each ray is traced forwards from the stop to the sensor plane and backwards
-    through the lens in front of the stop into the scene; it counts when it clears every
-    aperture both ways. Binned as :func:`forward_flux`, whose sampling over the scene wastes
-    most rays on a wide-angle lens whose entrance pupil wanders across the front element.
-
-    :param prescription: the lens.
-    :param stop_radius_mm: clear radius of the stop.
-    :param stop_surface: surface carrying the stop, None for the stop plane.
-    :param object_distance_mm: l (only the sensor position depends on it).
-    :param sensor_radius_mm: outer radius of the last annulus.
-    :param bins: number of annuli of equal area.
-    :param rays: number of rays.
-    :param stop_cosine: the largest direction cosine at the stop (choose it generously).
-    :param chunk: rays per batch.
-    :param seed: shift of the sequence.
-    :return: ``(edges_mm, irradiance)`` as :func:`forward_flux` (E / L, projected sr).
-    """
-    rng = np.random.default_rng(seed)
-    system = lens_system(prescription, stop_radius_mm, stop_surface)
-    sensor_z, _ = image_plane(prescription, object_distance_mm)
-    j = next(i for i, e in enumerate(system.elements) if e.is_stop)
-    stop = system.elements[j]
-    front = reversed_system(System(system.elements[:j]), stop.z_mm,
-                            math.isinf(object_distance_mm))
-    rear = System(system.elements[j if stop.surface is not None else j + 1:])
-    n = stop.n_before
-    sample_radius = 1.25 * stop_radius_mm
-    flux = np.zeros(bins)
-    points = _r2_sequence(rays, 4, rng)
-    for start in range(0, rays, chunk):
-        u = points[start:start + chunk]
-        x, y = _disk(u[:, 0], u[:, 1], sample_radius)
-        kx, ky = _disk(u[:, 2], u[:, 3], stop_cosine)
-        kz = np.sqrt(1.0 - kx * kx - ky * ky)
-        ok = x * x + y * y <= stop_radius_mm ** 2 if stop.surface is None else True
-        back, _ = trace_pass(front, x, y, 0.0, -kx, -ky, kz)
-        ahead, (ex, ey, ez, ekx, eky, ekz) = trace_pass(rear, x, y, stop.z_mm, kx, ky, kz)
-        ok = ok & back & ahead
-        s = (sensor_z - ez[ok]) / ekz[ok]
-        r2 = (ex[ok] + s * ekx[ok]) ** 2 + (ey[ok] + s * eky[ok]) ** 2
-        index = np.floor(bins * r2 / sensor_radius_mm ** 2).astype(np.int64)
-        flux += np.bincount(index[index < bins], minlength=bins)
-    edges = sensor_radius_mm * np.sqrt(np.arange(bins + 1) / bins)
-    measure = n * n * math.pi * sample_radius ** 2 * math.pi * stop_cosine ** 2 / rays
-    area = math.pi * sensor_radius_mm ** 2 / bins
-    return edges, flux * measure / area
+                      distance / 1000.0 if distance > 0 else LENSFUN_INFINITY_M, reach)

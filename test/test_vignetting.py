@@ -159,3 +159,19 @@ def test_cli_info_and_exports(capsys, tmp_path):
     assert '<vignetting model="pa" focal="4.437" aperture="4.44" distance="1" k1="' in out
     assert 'max fit error ' in out and ' pts' in out
     assert main(['vignetting', '--params', CASE2]) == 2
+
+
+@pytest.mark.skipif(not (ROOT / 'config' / 'fisheye.yaml').exists(),
+                    reason='no config/fisheye.yaml')
+def test_lensfun_fit_stops_at_the_fisheye_image_circle(capsys):
+    model = build_model(load_params_file(ROOT / 'config' / 'fisheye.yaml'))
+    curve = model.illumination()
+    assert curve.corner_ri == 0.0                  # the corners lie beyond the image circle
+    fit = il.lensfun_fit(model, curve)
+    half = math.hypot(model.width / 2 * model.pixel_mm[0], model.height / 2 * model.pixel_mm[1])
+    assert 0.7 < fit.fit_radius < 0.8
+    assert fit.fit_radius * half <= model.curve.valid_real_mm + 0.01
+    assert fit.max_error_pts < 0.5
+    assert main(['vignetting', '--params', str(ROOT / 'config' / 'fisheye.yaml'),
+                 '--lensfun']) == 0
+    assert 'max fit error' in capsys.readouterr().out
