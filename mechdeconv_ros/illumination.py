@@ -494,7 +494,7 @@ class LensfunFit:
                 f'k1="{self.k1:.6g}" k2="{self.k2:.6g}" k3="{self.k3:.6g}"/>')
 
     def comment(self) -> str:
-        """Return the fit's error as an XML comment (``max fit error N pts``)."""
+        """Return the XML comment with the fit's largest error (max fit error N pts)."""
         text = f'max fit error {self.max_error_pts:.3g} pts'
         if self.fit_radius < 1.0:
             text += (f' (fitted to r <= {self.fit_radius:.3f}, where the light ends: '
