@@ -166,8 +166,9 @@ def agreement(rays: int) -> dict[str, Any]:
         'wide angle clipped (85 deg)': (wide, 'stop', 0.75),
         'case2 (stop count)': (load_params_file(config / 'case2.yaml'), 'stop', 0.5),
     }
-    if (config / 'fisheye.yaml').exists():
-        cases['fisheye'] = (load_params_file(config / 'fisheye.yaml'), 'stop', 0.95)
+    for name in ('wide_angle', 'fisheye'):
+        if (config / f'{name}.yaml').exists():
+            cases[name] = (load_params_file(config / f'{name}.yaml'), 'stop', 0.95)
     out = {}
     for name, (values, method, extent) in cases.items():
         start = time.monotonic()

@@ -187,8 +187,10 @@ def test_stop_flux_agrees_with_the_forward_count_on_case2():
     assert_allclose(counted, traced, atol=0.005)
 
 
-@pytest.mark.skipif(not (CONFIG / 'fisheye.yaml').exists(), reason='no config/fisheye.yaml')
-def test_stop_flux_agrees_on_the_fisheye():
-    values = load_params_file(CONFIG / 'fisheye.yaml')
+@pytest.mark.parametrize('name', ['fisheye', 'wide_angle'])
+def test_stop_flux_agrees_on_the_wide_angle_configs(name):
+    if not (CONFIG / f'{name}.yaml').exists():
+        pytest.skip(f'no config/{name}.yaml')
+    values = load_params_file(CONFIG / f'{name}.yaml')
     _, traced, counted = _stop_reference(values, 0.95)
     assert_allclose(counted, traced, atol=0.005)
