@@ -123,6 +123,9 @@ def format_report(report: dict[str, Any]) -> str:
         if 'corner_pupil_pass_fraction' in ri:
             line += (f" ({100.0 * ri['corner_pupil_pass_fraction']:.1f} % of the stop's beam "
                      'passes the other apertures)')
+        if ri['lit_height_mm'] < ri['corner_height_mm']:
+            line += (f"; light reaches {ri['lit_height_mm']:.4g} mm of the "
+                     f"{ri['corner_height_mm']:.4g} mm to the corner")
         lines.append(line)
     lines += [f'warning: {w}' for w in report['warnings']]
     return '\n'.join(lines)

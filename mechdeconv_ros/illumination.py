@@ -111,6 +111,12 @@ class Illumination:
         """
         return np.interp(np.asarray(height_mm, dtype=np.float64), self.height_mm, self.ri)
 
+    @property
+    def lit_height_mm(self) -> float:
+        """Return the largest traced height that any ray reaches (RI > 0)."""
+        lit = np.flatnonzero(self.ri > 0.0)
+        return float(self.height_mm[lit[-1]]) if lit.size else 0.0
+
     def report(self) -> dict[str, Any]:
         """Return the JSON-ready ``relative_illumination`` entry of ``mechdeconv info``."""
         out: dict[str, Any] = {
@@ -118,6 +124,7 @@ class Illumination:
             'ri': [round(float(v), 6) for v in self.ri],
             'corner_ri': round(float(self.corner_ri), 6),
             'corner_height_mm': round(float(self.corner_height_mm), 9),
+            'lit_height_mm': round(float(self.lit_height_mm), 9),
         }
         if self.pupil_pass_fraction is not None:
             out['pupil_pass_fraction'] = [round(float(v), 6) for v in self.pupil_pass_fraction]
