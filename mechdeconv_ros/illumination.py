@@ -303,13 +303,16 @@ def beam_area(system: System, heights_mm: FloatArray, *, scan: int = SCAN_SAMPLE
 
 
 def relative_illumination(model: Any, *, samples: int = RI_SAMPLES,
-                          with_fraction: bool = True) -> Illumination:
+                          with_fraction: bool = True,
+                          known: Illumination | None = None) -> Illumination:
     """
     Trace the relative illumination of a :class:`~mechdeconv_ros.model.LensModel`.
 
     :param model: the lens model (its values, prescription, sensor and pixel pitch).
     :param samples: heights from the axis to 1.02 x the raw image's half-diagonal.
     :param with_fraction: also trace the stop-only beam for ``pupil_pass_fraction``.
+    :param known: the curve of this model traced without the fraction (the gain map's): only
+        the stop-only beam is traced then, at its heights.
     :return: the curve.
     :raises ValueError: when not even the axial beam passes the lens.
     """
@@ -323,6 +326,14 @@ def relative_illumination(model: Any, *, samples: int = RI_SAMPLES,
     px, py = model.pixel_mm
     corner = math.hypot((model.width - 1) / 2.0 * px, (model.height - 1) / 2.0 * py)
     edge = math.hypot(model.width / 2.0 * px, model.height / 2.0 * py)
+    if known is not None and with_fraction:
+        heights = known.height_mm
+        area = known.ri * beam_area(system, np.zeros(1))[0]
+        stop_only = beam_area(system.without_semi_diameters(), heights)
+        with np.errstate(invalid='ignore', divide='ignore'):
+            fraction = np.where(stop_only > 0, np.minimum(1.0, area / stop_only), 0.0)
+        return Illumination(heights, known.ri, fraction, known.corner_height_mm,
+                            known.corner_ri)
     heights = np.linspace(0.0, 1.02 * edge, samples)
     area = beam_area(system, heights)
     if not area[0] > 0:

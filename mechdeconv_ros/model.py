@@ -211,7 +211,9 @@ class LensModel:
         cached = self._illumination_cache.get(True) or self._illumination_cache.get(
             with_fraction)
         if cached is None:
-            cached = relative_illumination(self, with_fraction=with_fraction)
+            # The gain map's curve (no fraction) needs only the stop-only beam added.
+            cached = relative_illumination(self, with_fraction=with_fraction,
+                                           known=self._illumination_cache.get(False))
             self._illumination_cache[with_fraction] = cached
         return cached
 
