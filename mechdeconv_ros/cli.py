@@ -9,6 +9,7 @@ Commands::
     mechdeconv correct --params FILE IN OUT          (an image, or a folder to a folder)
     mechdeconv plot --params FILE OUT.png
     mechdeconv camera-info --params FILE [--width W --height H]
+    mechdeconv vignetting --params FILE [--png OUT.png] [--lensfun]
 
 ``--params`` takes a ROS 2 params file (``/**: ros__parameters:``) such as config/case2.yaml;
 ``-p name=value`` overrides one parameter. Bad input prints one line naming the parameter or
@@ -131,6 +132,16 @@ def format_report(report: dict[str, Any]) -> str:
         f"{_px(report['fit_rms_px'])})",
         _field_line(report),
     ]
+    ri = report.get('relative_illumination')
+    if ri:
+        line = f"relative illumination: {ri['corner_ri']:.3f} at the raw corner"
+        if 'corner_pupil_pass_fraction' in ri:
+            line += (f" ({100.0 * ri['corner_pupil_pass_fraction']:.1f} % of the stop's beam "
+                     'passes the other apertures)')
+        if ri['lit_height_mm'] < ri['corner_height_mm']:
+            line += (f"; light reaches {ri['lit_height_mm']:.4g} mm of the "
+                     f"{ri['corner_height_mm']:.4g} mm to the corner")
+        lines.append(line)
     lines += [f'warning: {w}' for w in report['warnings']]
     return '\n'.join(lines)
 
@@ -219,11 +230,37 @@ def cmd_plot(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_vignetting(args: argparse.Namespace) -> int:
+    """Export the traced vignetting: a 16-bit attenuation PNG and/or a lensfun entry."""
+    from mechdeconv_ros.illumination import lensfun_fit, raw_attenuation
+
+    if not args.png and not args.lensfun:
+        raise UsageError('vignetting: give --png OUT.png, --lensfun or both')
+    model = _model(args)
+    try:
+        curve = model.illumination(with_fraction=False)
+    except ValueError as err:
+        raise UsageError(f'lens.aperture_diameter_mm: {err}') from None
+    if args.png:
+        import cv2
+        attenuation = raw_attenuation(model, curve)
+        image = np.round(attenuation * (65535.0 / float(np.max(attenuation))))
+        if not cv2.imwrite(str(args.png), image.astype(np.uint16)):
+            raise UsageError(f'--png {args.png}: cannot write the image there')
+        print(f'wrote {args.png} ({model.width}x{model.height} px, 16-bit, corner RI '
+              f'{curve.corner_ri:.4f})')
+    if args.lensfun:
+        fit = lensfun_fit(model, curve)
+        print(fit.xml())
+        print(fit.comment())
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """
     Build the argument parser.
 
-    :return: the parser with its four sub-commands.
+    :return: the parser with its sub-commands.
     """
     parser = argparse.ArgumentParser(
         prog='mechdeconv',
@@ -253,6 +290,14 @@ def build_parser() -> argparse.ArgumentParser:
     plot = add('plot', 'plot distortion curve, displacement field, grid before/after', True)
     plot.add_argument('output', help='PNG file to write')
     plot.set_defaults(func=cmd_plot)
+    vignetting = add('vignetting', 'export the traced vignetting (DSO/TUM PNG, lensfun entry)',
+                     True)
+    vignetting.add_argument('--png', metavar='OUT.png',
+                            help='write the attenuation at each raw pixel as a 16-bit PNG '
+                                 '(brightest pixel 65535)')
+    vignetting.add_argument('--lensfun', action='store_true',
+                            help='print a lensfun <vignetting model="pa"/> entry')
+    vignetting.set_defaults(func=cmd_vignetting)
     return parser
 
 

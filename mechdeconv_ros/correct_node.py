@@ -58,6 +58,7 @@ from mechdeconv_ros.live_model import (  # noqa: F401 - MAX_SURFACES: the node's
     changes_of, FrameDropped, LiveModel, MAX_SURFACES)
 from mechdeconv_ros.param_services import guard_parameter_services
 from mechdeconv_ros.params import SCHEMA
+from mechdeconv_ros.remap import Rectifier
 from mechdeconv_ros.ros_params import declare_schema
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
@@ -113,9 +114,13 @@ class CorrectNode(Node):
         self._pool = OutputImagePool()
         self._subscription: Subscription | None = None
         self._logged: dict[str, float] = {}         # kind of error -> time last logged, s
+        self._channels = 1          # of the last frame: the rebuild prepares its gain map
+        self._depth_gain_noted = False
+        self._warned_model: Any = None
         super().__init__('correct_node', **kwargs)
         self._live = LiveModel(
-            declare_schema(self, SCHEMA), extras=camera_infos_from_model, log=self._log_line)
+            declare_schema(self, SCHEMA), extras=camera_infos_from_model, log=self._log_line,
+            build_maps=self._build_maps)
         guard_parameter_services(self, self._live.start_requested_rebuild,
                                  bool(kwargs.get('allow_undeclared_parameters', False)))
         self._apply_threads()
@@ -177,6 +182,24 @@ class CorrectNode(Node):
             self._apply_threads()
         if 'lazy_subscription' in changed:
             self._update_subscription()
+
+    def _build_maps(self, model: Any) -> Rectifier:
+        """
+        Build the remap tables and, with ``output.vignetting_correction``, the gain map.
+
+        Runs in the rebuild thread (or in the executor for a new frame size); the gain map is
+        replicated here for the channel count of the last frame, so the first frame after
+        the swap does not pay for it. A gain limit that ends the corrected field inside the
+        image is logged once per model.
+        """
+        rectifier = Rectifier(model)
+        if rectifier.gain is not None:
+            rectifier.gain_for(self._channels)
+            # (The allocator warm-up builds a model's maps again: warn once per model.)
+            if rectifier.vignetting_warning and model is not self._warned_model:
+                self._warned_model = model
+                self.get_logger().warning(rectifier.vignetting_warning)
+        return rectifier
 
     def _apply_threads(self) -> None:
         threads = int(self._live.value('remap_threads'))
@@ -240,7 +263,16 @@ class CorrectNode(Node):
         try:
             model = active.model
             out = self._pool.get(model.out_width, model.out_height, encoding.name)
-            active.rectifier.correct(pixels, out.pixels, nearest=encoding.depth)
+            # Depth is never gain-corrected (a distance divided by RI means nothing).
+            active.rectifier.correct(pixels, out.pixels, nearest=encoding.depth,
+                                     gain=not encoding.depth)
+            self._channels = 1 if pixels.ndim == 2 else int(pixels.shape[2])
+            if encoding.depth and active.rectifier.gain is not None and \
+                    not self._depth_gain_noted:
+                self._depth_gain_noted = True
+                self.get_logger().info(
+                    f'output.vignetting_correction: {encoding.name} is a depth encoding; '
+                    'depth images are remapped but never gain-corrected')
             info_raw, info_rect = active.extras
             out.msg.header = info_raw.header = info_rect.header = header
             self._pub_image.publish(out.msg)

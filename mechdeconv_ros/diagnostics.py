@@ -7,13 +7,15 @@ The status is named after the node's fully qualified name (``/left/correct_node:
 correction``), so two cameras' nodes are told apart. Its values are the model revision and
 rebuild counters (:class:`mechdeconv_ros.live_model.LiveStatus`), the frame counters and
 timings (:class:`FrameStats`, per diagnostics period) and the lens summary
-(``LensModel.report()`` flattened to dotted keys, e.g. ``fov_deg.horizontal``). The input is
-named by ``image_transport`` and ``input_topic``; with compressed input, ``frames_undecodable``
-counts refused payloads and ``decode_time_ms_{mean,max,last}`` time the JPEG/PNG decoding
-(included in ``frame_time_ms_*``); ``frames_out_compressed`` counts the frames published on
-``image_rect/compressed``. Level: ERROR
-while the last rebuild failed (the previous model stays in use), WARN for the model's warnings
-or frames that all fail, OK otherwise.
+(``LensModel.report()`` flattened to dotted keys, e.g. ``fov_deg.horizontal``, and the corner
+relative illumination ``relative_illumination.corner_ri``), and whether the vignetting
+correction is on (``vignetting_correction``; its gain-limit warning joins the model's
+warnings). The input is named by ``image_transport`` and ``input_topic``; with compressed
+input, ``frames_undecodable`` counts refused payloads and ``decode_time_ms_{mean,max,last}``
+time the JPEG/PNG decoding (included in ``frame_time_ms_*``); ``frames_out_compressed`` counts
+the frames published on ``image_rect/compressed``. Level: ERROR while the last rebuild failed
+(the previous model stays in use), WARN for the model's warnings or frames that all fail, OK
+otherwise.
 """
 
 from __future__ import annotations
@@ -138,6 +140,10 @@ def diagnostics_message(node: Node, live: LiveStatus, stats: FrameStats,
         if live.report is not None:
             entries.update(_flatten_report(live.report))
             warnings = list(live.report.get('warnings', []))
+        rectifier = live.active.rectifier
+        entries['vignetting_correction'] = getattr(rectifier, 'gain', None) is not None
+        if getattr(rectifier, 'vignetting_warning', None):
+            warnings.append(rectifier.vignetting_warning)
         entries['summary_pending'] = summary_pending
     if live.rebuild_error:
         status.level = DiagnosticStatus.ERROR
@@ -163,10 +169,16 @@ def diagnostics_message(node: Node, live: LiveStatus, stats: FrameStats,
     return array
 
 
+#: Curves of the model report that /diagnostics leaves out (the scalars stay: e.g.
+#: ``relative_illumination.corner_ri``); ``mechdeconv info --json`` has them.
+BULKY = ('distortion_curve', 'warnings', 'relative_illumination.image_height_mm',
+         'relative_illumination.ri', 'relative_illumination.pupil_pass_fraction')
+
+
 def _flatten_report(report: Mapping[str, Any], prefix: str = '') -> Iterable[tuple[str, Any]]:
-    """Yield ``(dotted key, value)`` of a model report, skipping the bulky curve."""
+    """Yield ``(dotted key, value)`` of a model report, skipping the bulky curves."""
     for key, value in report.items():
-        if key in ('distortion_curve', 'warnings'):
+        if f'{prefix}{key}' in BULKY:
             continue
         name = f'{prefix}{key}'
         if isinstance(value, Mapping):

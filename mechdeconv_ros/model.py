@@ -55,6 +55,7 @@ import math
 from typing import Any, Callable, Mapping
 
 from mechdeconv_ros import constraints
+from mechdeconv_ros.illumination import Illumination, relative_illumination
 from mechdeconv_ros.optics import biconvex_for_focal_length, propagate_sigma, thick_lens
 from mechdeconv_ros.params import (
     ASPHERE_POWERS, check_values, INTERPOLATIONS, MAX_FRAME_PIXELS, ParamValue)
@@ -207,6 +208,26 @@ class LensModel:
     projection: str = 'pinhole'
     field_curve: RadialMap | None = None
     _summary_cache: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
+    _illumination_cache: dict[bool, Illumination] = field(default_factory=dict, repr=False,
+                                                          compare=False)
+
+    def illumination(self, with_fraction: bool = True) -> Illumination:
+        """
+        Return the relative illumination traced over the sensor, computed on first use.
+
+        :param with_fraction: also trace the stop-only beam (``pupil_pass_fraction``), which
+            doubles the cost; the gain map does not need it.
+        :return: the curve (:func:`mechdeconv_ros.illumination.relative_illumination`).
+        :raises ValueError: when not even the axial beam passes the lens.
+        """
+        cached = self._illumination_cache.get(True) or self._illumination_cache.get(
+            with_fraction)
+        if cached is None:
+            # The gain map's curve (no fraction) needs only the stop-only beam added.
+            cached = relative_illumination(self, with_fraction=with_fraction,
+                                           known=self._illumination_cache.get(False))
+            self._illumination_cache[with_fraction] = cached
+        return cached
 
     @property
     def summary(self) -> dict[str, Any]:
@@ -273,6 +294,11 @@ class LensModel:
             90 deg, ``real_height_mm``), at most 257 samples.
         """
         out = dict(self.summary)
+        try:
+            illumination: dict[str, Any] | None = self.illumination().report()
+        except ValueError as err:
+            illumination = None
+            out['warnings'] = list(out['warnings']) + [f'relative illumination: {err}']
         out.update({
             'width_px': self.width, 'height_px': self.height,
             'out_width_px': self.out_width, 'out_height_px': self.out_height,
@@ -285,6 +311,7 @@ class LensModel:
                                                          'rms_error_px': fit.rms_error_px}
                                   for fit in self.equivalent_fits},
             'max_displacement_px': self.max_displacement_px,
+            'relative_illumination': illumination,
         })
         field = out.pop('_field_curve')
         theta, real = field['theta_rad'], field['real_mm']

@@ -183,6 +183,13 @@ SCHEMA: tuple[ParamSpec, ...] = (
        0, MAX_SIDE_PX),
     _i('output.height_px', 0, 'px', 'Height of the corrected image; 0 = the input height.',
        0, MAX_SIDE_PX),
+    ParamSpec('output.vignetting_correction', 'bool', False, '',
+              'Divide image_rect by the relative illumination traced through the lens '
+              '(brighter corners, a flat white wall stays flat); false = a purely geometric '
+              'rectification. Depth images (16UC1, 32FC1) are never gain-corrected.'),
+    _d('output.max_vignetting_gain', 4.0, '1',
+       'Largest gain of the vignetting correction; where the relative illumination is below '
+       '1 / this the corrected field ends (black).', 1.0, 1.0e3),
     # --- node behaviour (no effect on the model) ---
     ParamSpec('lazy_subscription', 'bool', True, '',
               'Subscribe to image_raw only while an output topic has a subscriber, like '

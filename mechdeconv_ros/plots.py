@@ -1,7 +1,10 @@
 # Copyright 2026 The mechdeconv_ros Authors.
 # SPDX-License-Identifier: Apache-2.0
 """
-Pictures of a LensModel: distortion curve, displacement field, a grid before and after.
+Pictures of a LensModel: distortion, a grid before and after, relative illumination.
+
+Panels: the distortion curve, the displacement field, a grid before and after the
+correction, and the relative illumination (curve and raw attenuation map).
 
 Matplotlib with the Agg backend (no display needed). The grid is rendered in the ideal
 (corrected) image and pushed through the forward model to make what the camera would see, so
@@ -86,11 +89,12 @@ def to_display(image: np.ndarray, scale: float) -> np.ndarray:
 
 def make_figure(model: LensModel) -> Any:
     """
-    Draw the four panels: curve, displacement field, raw grid, corrected grid.
+    Draw the six panels: curve, displacement field, raw grid, corrected grid, RI, RI map.
 
     :param model: the lens model.
     :return: the matplotlib figure (Agg); the image panels are ``fig.axes[2:4]`` in the order
-        raw, corrected (``fig.axes`` also holds the twin axis and the colour bar after them).
+        raw, corrected (``fig.axes`` also holds the twin axis, the colour bar and the two
+        relative-illumination panels after them).
     """
     import matplotlib
     matplotlib.use('Agg')
@@ -98,7 +102,10 @@ def make_figure(model: LensModel) -> Any:
 
     from mechdeconv_ros.remap import distort_image, Rectifier
 
-    fig, axes = plt.subplots(2, 2, figsize=(12, 9), dpi=DPI)
+    fig = plt.figure(figsize=(18, 9), dpi=DPI)
+    layout = fig.add_gridspec(2, 3)
+    # The four original panels first, so fig.axes[2:4] stay the raw and corrected images.
+    axes = np.array([[fig.add_subplot(layout[r, c]) for c in range(2)] for r in range(2)])
     pitch = min(model.pixel_mm)
     ideal, real = model.curve.ideal_mm, model.curve.real_mm
     ax = axes[0, 0]
@@ -142,6 +149,8 @@ def make_figure(model: LensModel) -> Any:
     for ax, title in panels:
         ax.set_title(title)
         ax.set_axis_off()
+    illumination_panels(model, fig.add_subplot(layout[0, 2]), fig.add_subplot(layout[1, 2]),
+                        fig)
     values = model.values
     if values['lens.surfaces.radius_mm']:
         stop = f"{len(values['lens.surfaces.radius_mm'])} surfaces, stop surface " \
@@ -167,9 +176,49 @@ def make_figure(model: LensModel) -> Any:
     return fig
 
 
+def illumination_panels(model: LensModel, curve_ax: Any, map_ax: Any, fig: Any) -> None:
+    """
+    Draw the relative illumination panels.
+
+    RI and the pupil pass fraction over the real image height, and the attenuation at each
+    raw pixel (what ``mechdeconv vignetting --png`` writes).
+
+    :param model: the lens model.
+    :param curve_ax: axes for the curves.
+    :param map_ax: axes for the raw attenuation map.
+    :param fig: the figure (for the colour bar).
+    """
+    from mechdeconv_ros.illumination import raw_attenuation
+
+    try:
+        curve = model.illumination()
+    except ValueError as err:
+        curve_ax.set_title(f'relative illumination: {err}', fontsize=8)
+        return
+    curve_ax.plot(curve.height_mm, curve.ri, color='tab:blue', label='relative illumination')
+    if curve.pupil_pass_fraction is not None:
+        curve_ax.plot(curve.height_mm, curve.pupil_pass_fraction, color='tab:green', ls='--',
+                      label="share of the stop's beam passing the other apertures")
+    gain = float(model.values['output.max_vignetting_gain'])
+    curve_ax.axhline(1.0 / gain, color='tab:red', lw=0.8, ls=':',
+                     label=f'1 / max gain ({gain:g}): corrected field ends below')
+    curve_ax.axvline(curve.corner_height_mm, color='grey', ls='--', lw=0.8,
+                     label='raw image corner')
+    curve_ax.set_ylim(0.0, 1.05)
+    curve_ax.set_xlabel('real image height on the sensor [mm]')
+    curve_ax.set_ylabel('sensor irradiance / on axis')
+    curve_ax.set_title(f'traced relative illumination (corner {curve.corner_ri:.3f})')
+    curve_ax.legend(loc='lower left', fontsize=8)
+    image = map_ax.imshow(raw_attenuation(model, curve), cmap='magma', vmin=0.0, vmax=1.0,
+                          interpolation='bilinear')
+    fig.colorbar(image, ax=map_ax, label='relative illumination')
+    map_ax.set_title('attenuation at each raw pixel (vignette map)')
+    map_ax.set_axis_off()
+
+
 def plot_model(model: LensModel, path: Path) -> None:
     """
-    Write a four-panel PNG: curve, displacement field, raw grid, corrected grid.
+    Write a six-panel PNG: curve, displacement field, raw grid, corrected grid, RI, RI map.
 
     :param model: the lens model.
     :param path: the PNG to write.

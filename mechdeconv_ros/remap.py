@@ -23,7 +23,10 @@ bilinear remap on our machines, and a nearest-neighbour CV_16SC2 map is kept for
 
 from __future__ import annotations
 
+from typing import Any
+
 import cv2
+from mechdeconv_ros.illumination import Illumination
 from mechdeconv_ros.model import LensModel
 import numpy as np
 import numpy.typing as npt
@@ -33,14 +36,18 @@ _OUTSIDE = -1000.0
 
 
 def _quadrant_scale(model: LensModel, xn: npt.NDArray[np.float32],
-                    yn: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
+                    yn: npt.NDArray[np.float32],
+                    gain_table: npt.NDArray[np.float64] | None = None) -> Any:
     """
     Return ``s = R(rho) / rho`` on the grid ``yn x xn`` (both >= 0); -1 outside the field.
 
     :param model: the lens model.
     :param xn: normalised ideal x of the quadrant's columns.
     :param yn: normalised ideal y of the quadrant's rows.
-    :return: ``(len(yn), len(xn))`` float32.
+    :param gain_table: the vignetting gain at each ideal radius of ``model.curve`` (or None);
+        it is looked up in the same ``cv2.remap`` pass, as a second channel of the table.
+    :return: ``(len(yn), len(xn))`` float32, or ``(scale, gain)`` with a gain table (the gain
+        is 0 outside the field).
     """
     curve = model.curve
     v = model.image_distance_mm
@@ -49,15 +56,21 @@ def _quadrant_scale(model: LensModel, xn: npt.NDArray[np.float32],
     # Table of s over the uniformly spaced ideal radii (s(0) = 1: paraxial at the centre).
     with np.errstate(invalid='ignore', divide='ignore'):
         table = np.where(curve.ideal_mm > 0.0, curve.real_mm / curve.ideal_mm, 1.0)
-    table = np.ascontiguousarray(table[None, :], dtype=np.float32)
+    if gain_table is not None:
+        table = np.stack([table, gain_table], axis=-1)
+    table = np.ascontiguousarray(table[None], dtype=np.float32)
     # One CV_32FC2 map (x = table index, y = 0 on the one-row table) for cv2.remap.
     index = np.zeros((len(yn), len(xn), 2), np.float32)
     np.hypot(xn[None, :], yn[:, None], out=index[..., 0])
     index[..., 0] *= np.float32(v / step)
-    scale = cv2.remap(table, index, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
-                      borderValue=-1.0)
-    scale[index[..., 0] > samples - 1] = -1.0
-    return scale
+    looked_up = cv2.remap(table, index, None, cv2.INTER_LINEAR,
+                          borderMode=cv2.BORDER_CONSTANT, borderValue=(-1.0, 0.0, 0.0, 0.0))
+    outside = index[..., 0] > samples - 1
+    if gain_table is None:
+        looked_up[outside] = -1.0
+        return looked_up
+    looked_up[outside] = (-1.0, 0.0)
+    return looked_up[..., 0], looked_up[..., 1]
 
 
 Map = npt.NDArray[np.float32]
@@ -71,6 +84,51 @@ def build_float_maps(model: LensModel) -> tuple[Map, Map]:
     :return: ``(map_x, map_y)``, each ``(out_height, out_width)`` float32, raw-image pixels;
         invalid pixels point outside the source.
     """
+    map_x, map_y, _ = _build_maps(model, None)
+    return map_x, map_y
+
+
+def _gain_table(model: LensModel, illumination: Illumination,
+                max_gain: float) -> npt.NDArray[np.float64]:
+    """
+    Tabulate the gain min(1/RI, max_gain) at the ideal radii of ``model.curve``.
+
+    RI is taken at the real radius each ideal radius images to; the gain is 0 where
+    RI < 1 / max_gain (the corrected field ends there).
+    """
+    ri = illumination.at(model.curve.real_mm)
+    with np.errstate(divide='ignore'):
+        gain = np.where(ri >= 1.0 / max_gain, 1.0 / np.maximum(ri, 1e-12), 0.0)
+    return np.minimum(gain, max_gain)
+
+
+def build_gain_map(model: LensModel, illumination: Illumination, max_gain: float) -> Map:
+    """
+    Build the vignetting gain of each corrected pixel, from RI at its source position.
+
+    gain = min(1 / RI(rho_real), max_gain), rho_real the real sensor radius of the output
+    pixel's source; 0 where RI < 1 / max_gain (the corrected field ends) and outside the
+    valid field.
+
+    :param model: the lens model.
+    :param illumination: its relative illumination.
+    :param max_gain: the largest gain (>= 1).
+    :return: ``(out_height, out_width)`` float32.
+    """
+    return _build_maps(model, _gain_table(model, illumination, max_gain))[2]
+
+
+def _mirror_quadrant(full: np.ndarray, quad: np.ndarray, c0: int, r0: int) -> None:
+    """Fill ``full`` from its lower-right quadrant ``quad`` by an even mirroring."""
+    oh, ow = full.shape
+    full[r0:, c0:] = quad
+    full[r0:, :c0] = quad[:, ow - 2 * c0:ow - c0][:, ::-1]
+    full[:r0] = full[oh - r0:oh][::-1]
+
+
+def _build_maps(model: LensModel, gain_table: npt.NDArray[np.float64] | None
+                ) -> tuple[Map, Map, Map | None]:
+    """Build the float maps and, given a gain table over the curve's ideal radii, the gain."""
     ow, oh = model.out_width, model.out_height
     fx, fy, cx, cy = model.K[0, 0], model.K[1, 1], model.K[0, 2], model.K[1, 2]
     xn = ((np.arange(ow) - model.K_new[0, 2]) / model.K_new[0, 0]).astype(np.float32)
@@ -78,7 +136,14 @@ def build_float_maps(model: LensModel) -> tuple[Map, Map]:
     # Output column u and ow-1-u have opposite xn (likewise rows): compute the lower-right
     # quadrant, then mirror it: map_x(ow-1-u) = 2 c_x - map_x(u), and map_y likewise.
     c0, r0 = ow // 2, oh // 2
-    scale = _quadrant_scale(model, xn[c0:], yn[r0:])
+    gain = None
+    if gain_table is None:
+        scale = _quadrant_scale(model, xn[c0:], yn[r0:])
+    else:
+        # The gain depends on the ideal radius only, as s does: one look-up for both.
+        scale, quad_gain = _quadrant_scale(model, xn[c0:], yn[r0:], gain_table)
+        gain = np.empty((oh, ow), np.float32)
+        _mirror_quadrant(gain, quad_gain, c0, r0)
     invalid = scale < 0.0
     map_x = np.empty((oh, ow), np.float32)
     map_y = np.empty((oh, ow), np.float32)
@@ -97,7 +162,7 @@ def build_float_maps(model: LensModel) -> tuple[Map, Map]:
     map_y[r0:, :c0] = quad_y[:, ow - 2 * c0:ow - c0][:, ::-1]
     map_x[:r0] = map_x[oh - r0:oh][::-1]
     np.subtract(np.float32(2.0 * cy), map_y[oh - r0:oh][::-1], out=map_y[:r0])
-    return map_x, map_y
+    return map_x, map_y, gain
 
 
 class Rectifier:
@@ -106,18 +171,59 @@ class Rectifier:
 
     ``correct`` is safe to call from one thread at a time per instance; build a new Rectifier
     for a new model instead of mutating one, so a frame never sees two models.
+
+    With ``output.vignetting_correction`` the Rectifier also holds the gain map (float32, in
+    output coordinates, :func:`build_gain_map`) and ``correct`` multiplies the remapped frame
+    by it in place (cv2.multiply saturates integer images). ``vignetting_warning`` says, once
+    per model, where the gain limit ends the corrected field.
     """
 
-    def __init__(self, model: LensModel) -> None:
+    def __init__(self, model: LensModel, vignetting: bool | None = None) -> None:
         """
         Build the fixed-point maps (bilinear/cubic/lanczos table and nearest-neighbour).
 
         :param model: the lens model.
+        :param vignetting: build the vignetting gain map; None = ``output.vignetting_correction``.
         """
         self.model = model
-        map_x, map_y = build_float_maps(model)
+        if vignetting is None:
+            vignetting = bool(model.values.get('output.vignetting_correction', False))
+        self.gain: Map | None = None
+        self.vignetting_warning: str | None = None
+        table = None
+        if vignetting:
+            max_gain = float(model.values.get('output.max_vignetting_gain', 4.0))
+            curve = model.illumination(with_fraction=False)
+            table = _gain_table(model, curve, max_gain)
+            ends = np.flatnonzero(curve.ri < 1.0 / max_gain)
+            if ends.size and curve.height_mm[ends[0]] < curve.corner_height_mm:
+                self.vignetting_warning = (
+                    f'output.max_vignetting_gain: the relative illumination falls below '
+                    f'1/{max_gain:g} at {curve.height_mm[ends[0]]:.3g} mm from the centre, '
+                    f'inside the {curve.corner_height_mm:.3g} mm corner: the corrected field '
+                    'ends there (black beyond)')
+        map_x, map_y, self.gain = _build_maps(model, table)
         self.map1, self.map2 = cv2.convertMaps(map_x, map_y, cv2.CV_16SC2)
         self._nearest_map: np.ndarray | None = None
+        self._gains: dict[int, Map] = {}
+
+    def gain_for(self, channels: int) -> Map | None:
+        """
+        Return the gain map replicated for ``channels`` interleaved channels (cached).
+
+        Call it at rebuild time for the channel count the frames have, so the first frame
+        does not pay for the replication.
+
+        :param channels: 1 to 4.
+        :return: ``(out_height, out_width[, channels])`` float32, or None without correction.
+        """
+        if self.gain is None:
+            return None
+        gain = self._gains.get(channels)
+        if gain is None:
+            gain = self.gain if channels == 1 else cv2.merge([self.gain] * channels)
+            self._gains[channels] = gain
+        return gain
 
     @property
     def nearest_map(self) -> np.ndarray:
@@ -145,7 +251,7 @@ class Rectifier:
         return self.model.out_height, self.model.out_width
 
     def correct(self, src: np.ndarray, dst: np.ndarray | None = None, *,
-                nearest: bool = False) -> np.ndarray:
+                nearest: bool = False, gain: bool = True) -> np.ndarray:
         """
         Correct one frame.
 
@@ -154,6 +260,8 @@ class Rectifier:
         :param dst: optional preallocated ``(out_height, out_width[, C])`` output of the same
             dtype, written in place (e.g. a view on an outgoing message's buffer).
         :param nearest: use nearest-neighbour regardless of the model's interpolation (depth).
+        :param gain: apply the vignetting gain when the Rectifier has one; False for depth
+            images, which are never gain-corrected.
         :return: the corrected image (``dst`` when given). Pixels outside the valid field or
             the source are 0.
         :raises ValueError: when ``src`` does not have the model's size.
@@ -162,10 +270,22 @@ class Rectifier:
             raise ValueError(f'frame is {src.shape[1]}x{src.shape[0]} px but the model is '
                              f'{self.model.width}x{self.model.height} px')
         if nearest or self.model.interpolation == cv2.INTER_NEAREST:
-            return cv2.remap(src, self.nearest_map, None, cv2.INTER_NEAREST, dst=dst,
-                             borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-        return cv2.remap(src, self.map1, self.map2, self.model.interpolation, dst=dst,
-                         borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+            out = cv2.remap(src, self.nearest_map, None, cv2.INTER_NEAREST, dst=dst,
+                            borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        else:
+            out = cv2.remap(src, self.map1, self.map2, self.model.interpolation, dst=dst,
+                            borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        if gain and self.gain is not None:
+            channels = 1 if out.ndim == 2 else out.shape[2]
+            # In place; cv2 saturates uint8/uint16 instead of wrapping.
+            cv2.multiply(out, self.gain_for(channels), dst=out, dtype=_CV_DEPTH[out.dtype])
+        return out
+
+
+#: OpenCV depth of each image dtype the correction handles.
+_CV_DEPTH = {np.dtype(np.uint8): cv2.CV_8U, np.dtype(np.uint16): cv2.CV_16U,
+             np.dtype(np.int16): cv2.CV_16S, np.dtype(np.float32): cv2.CV_32F,
+             np.dtype(np.float64): cv2.CV_64F}
 
 
 def distortion_maps(model: LensModel, ideal_K: npt.NDArray[np.float64] | None = None

@@ -129,3 +129,15 @@ def test_run_all_writes_the_readme_tables_and_the_docs_page(tmp_path):
     assert '](../results/accuracy_thickness.png)' in page     # links work from docs/
     assert (docs.parent / '../results/accuracy_thickness.png').is_file()
     assert 'radii mean error' in page
+
+
+def test_vignetting_benchmark_quick(tmp_path):
+    from benchmarks import vignetting
+    doc = vignetting.run(tmp_path, quick=True)
+    saved = json.loads((tmp_path / 'vignetting.json').read_text())
+    assert set(saved['rebuild']['lenses']) == set(vignetting._lenses())
+    for lens in doc['rebuild']['lenses'].values():
+        assert lens['with_ms']['median_ms'] > 0 and lens['surfaces'] >= 2
+    assert all(r['gain']['median_ms'] > 0 for r in doc['per_frame'].values())
+    assert doc['agreement']['case2']['corner_ri'] == pytest.approx(0.837, abs=0.002)
+    assert any('| lens |' in line for line in vignetting.tables(doc))

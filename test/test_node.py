@@ -454,6 +454,14 @@ BAD_SETS = [
         Parameter('lens.surfaces.semi_diameter_mm', Parameter.Type.DOUBLE_ARRAY, [3.0, 3.0]),
         Parameter('lens.surfaces.conic', Parameter.Type.DOUBLE_ARRAY, [5.0, 0.0])),
      'lens.surfaces.conic'),
+    # Issue 14: a gain limit below 1 (or not finite), through both set services.
+    ('max-gain-0.5', (double('output.max_vignetting_gain', 0.5),),
+     'output.max_vignetting_gain'),
+    ('max-gain-0.5-atomic', (double('output.max_vignetting_gain', 0.5),
+                             Parameter('output.vignetting_correction', Parameter.Type.BOOL,
+                                       True)), 'output.max_vignetting_gain'),
+    ('max-gain-nan', (double('output.max_vignetting_gain', float('nan')),),
+     'output.max_vignetting_gain'),
 ]
 
 
@@ -588,6 +596,48 @@ def test_aspheric_prescription_and_equidistant_output_rebuild(
         assert cleared.successful, cleared.reason
     model = expected_model(harness.values, width, height)
     assert_camera_infos(_exchange_until_model(harness, outputs, msg, model), model)
+
+
+def test_vignetting_correction_brightens_the_corners(harness: Harness,
+                                                     outputs: Outputs) -> None:
+    width, height = SMALL
+    flat = np.full((height, width, 3), 100, np.uint8)
+    msg = make_image(flat, 'rgb8')
+    plain = harness.exchange(outputs, msg)
+    before, _ = image_to_array(plain['image'])
+    on = Parameter('output.vignetting_correction', Parameter.Type.BOOL, True)
+    result = harness.client.set_parameters(on)[0]
+    assert result.successful, result.reason
+    try:
+        values = dict(harness.values, **{'output.vignetting_correction': True})
+        model = expected_model(values, width, height)
+        expected = Rectifier(model).correct(flat)
+        deadline = time.monotonic() + 5.0
+        while True:
+            got, _ = image_to_array(harness.exchange(outputs, msg)['image'])
+            if np.array_equal(got, expected) or time.monotonic() > deadline:
+                break
+        npt.assert_array_equal(got, expected)
+        centre = got[height // 2, width // 2]
+        corner = got[2, 2]
+        npt.assert_array_equal(centre, before[height // 2, width // 2])
+        # The corner is divided by RI < 1: brighter than without the correction.
+        assert corner.min() > before[2, 2].max(), (corner, before[2, 2])
+        ri = model.illumination().at(np.hypot(*(np.subtract(
+            model.raw_from_rect(np.array([2.0, 2.0])), model.K[:2, 2]) * model.pixel_mm)))
+        npt.assert_allclose(corner.astype(float), before[2, 2] / ri, atol=1.0)
+        diag = harness.diag()
+        deadline = time.monotonic() + 5.0
+        while diag.get('vignetting_correction') != 'true' and time.monotonic() < deadline:
+            diag = harness.diag()
+        assert diag['vignetting_correction'] == 'true'
+        npt.assert_allclose(float(diag['relative_illumination.corner_ri']),
+                            model.illumination().corner_ri, rtol=1e-5)
+    finally:
+        off = Parameter('output.vignetting_correction', Parameter.Type.BOOL, False)
+        assert harness.client.set_parameters(off)[0].successful
+    model = expected_model(harness.values, width, height)
+    _exchange_until_model(harness, outputs, msg, model)
 
 
 def array_of(*values: float) -> Any:

@@ -35,6 +35,8 @@ def test_issue_contract_names_are_declared():
     sensor.pixel_size_y_um sensor.width_px sensor.height_px scene.distance_mm
     scene.focus_distance_mm scene.circle_of_confusion_mm output.alpha output.interpolation
     output.width_px output.height_px""".split()
+    # Issue 14: the vignetting correction.
+    contract += ['output.vignetting_correction', 'output.max_vignetting_gain']
     # Issue 11: aspheric surfaces.
     contract += ['lens.surfaces.conic', 'output.projection'] + [
         f'lens.surfaces.asphere_a{p}' for p in (4, 6, 8, 10, 12, 14, 16)]

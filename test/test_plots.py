@@ -83,4 +83,6 @@ def test_plot_model_writes_the_figure(tmp_path: Path) -> None:
     out = tmp_path / 'sub' / 'model.png'
     plot_model(model, out)
     image = cv2.imread(str(out))
-    assert image is not None and image.shape[:2] == (900, 1200)
+    assert image is not None and image.shape[:2] == (900, 1800)
+    # The relative-illumination panels (the third column) are drawn: not a blank column.
+    assert image[:, 1250:].std() > 10
