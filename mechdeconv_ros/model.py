@@ -1029,6 +1029,28 @@ def _marginal_ray(prescription: Prescription, distance: float, front_principal_z
     return -z_scene * u, u
 
 
+def pupil_scale(values: Mapping[str, Any], prescription: Prescription) -> float:
+    """
+    Return entrance pupil diameter / ``lens.aperture_diameter_mm`` (the f-number's aperture).
+
+    ``lens.aperture_diameter_mm`` is the physical stop. The f-number ``n_f = sqrt(2/q) f / D``
+    counts the entrance pupil D, the stop as seen from the scene. Thick-lens mode keeps the
+    paper's D = d_a (its stop stands near the front principal plane; exact for a stop in
+    front of the lens), so its constraints reproduce the paper. A prescription's stop may sit
+    behind strong elements (a fisheye's stop is about 6x its entrance pupil), so there D is the
+    paraxial image of the stop in object space: a marginal ray entering parallel at height 1
+    crosses the stop at height ``a`` and D = d_a / |a|.
+
+    :param values: checked parameter values.
+    :param prescription: the lens of those values.
+    :return: the factor, 1 in thick-lens mode.
+    """
+    if not _is_prescription_mode(values):
+        return 1.0
+    a = abs(_paraxial_height(prescription, 1.0, 0.0, prescription.stop_z_mm))
+    return 1.0 / a if a > 0.0 and math.isfinite(a) else 1.0
+
+
 def _elements(prescription: Prescription) -> list[list[int]]:
     """
     Return the glass elements: runs of surfaces joined by glass (index > 1 between them).
@@ -1204,7 +1226,8 @@ def _check_physical(vals: Mapping[str, Any], prescription: Prescription, para: A
         warnings.append(f'{stop_name}: the stop is {outside:.4g} mm {side} surface, farther '
                         f'than the focal length {f:.4g} mm: an unusual design (strong '
                         'distortion and vignetting)')
-    n_f = constraints.f_number(f, d_a, float(vals['lens.exposure_constant_q']))
+    n_f = constraints.f_number(f, d_a * pupil_scale(vals, prescription),
+                               float(vals['lens.exposure_constant_q']))
     if n_f < FAST_F_NUMBER:
         warnings.append(f'lens.aperture_diameter_mm: f/{n_f:.3g} is faster than '
                         f'f/{FAST_F_NUMBER:g}; few real lenses are (f/0.5 is the limit of an '
@@ -1304,7 +1327,8 @@ def _summary(model: LensModel) -> dict[str, Any]:
     w_mm = constraints.sensor_size_mm(model.width, vals['sensor.pixel_size_x_um'])
     h_mm = constraints.sensor_size_mm(model.height, vals['sensor.pixel_size_y_um'])
     q = float(vals['lens.exposure_constant_q'])
-    d_a = float(vals['lens.aperture_diameter_mm'])
+    # The f-number's aperture is the entrance pupil (pupil_scale: 1 for the paper's thick lens).
+    d_a = float(vals['lens.aperture_diameter_mm']) * pupil_scale(vals, model.prescription)
     n_f = constraints.f_number(f, d_a, q)
     c = constraints.circle_of_confusion_mm(f, float(vals['scene.circle_of_confusion_mm']))
     h = constraints.hyperfocal_mm(f, n_f, c)
@@ -1317,7 +1341,8 @@ def _summary(model: LensModel) -> dict[str, Any]:
         c_p = constraints.circle_of_confusion_mm(f_p, c_set)
         return constraints.hyperfocal_mm(f_p, n_fp, c_p)
 
-    sigma_d_a = float(vals['lens.tolerance.aperture_diameter_mm'])
+    sigma_d_a = float(vals['lens.tolerance.aperture_diameter_mm']) \
+        * pupil_scale(vals, model.prescription)
     sigma_h = _sigma_or_nan(hyper, {**nominal, 'd_a': d_a}, {**sigmas, 'd_a': sigma_d_a})
     focus = float(vals['scene.focus_distance_mm']) or distance
     focus = math.inf if focus == 0.0 else focus
@@ -1357,6 +1382,7 @@ def _summary(model: LensModel) -> dict[str, Any]:
             'y': _finite_or_none(constraints.feature_resolution_mm(
                 distance, vals['sensor.pixel_size_y_um'], f))},
         'f_number': n_f,
+        'entrance_pupil_diameter_mm': d_a,
         'circle_of_confusion_mm': c,
         'hyperfocal_mm': h,
         'hyperfocal_sigma_mm': sigma_h,

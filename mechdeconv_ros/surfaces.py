@@ -134,7 +134,8 @@ def _sag_and_slope(surface: SurfaceShape, u: np.ndarray) -> tuple[np.ndarray, np
     c = surface.curvature_per_mm
     q = 1.0 + surface.conic
     with np.errstate(**_ERRSTATE):
-        root = np.sqrt(1.0 - (q * c * c) * u)     # NaN outside the domain
+        # NaN outside the domain; an array even for 0-d input (np.divide writes into it).
+        root = np.asarray(np.sqrt(1.0 - (q * c * c) * u))
         z = c * u / (1.0 + root)
         dz = np.divide(0.5 * c, root, out=root)
         poly = _poly(surface)
