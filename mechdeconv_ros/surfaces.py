@@ -191,6 +191,11 @@ def intersect(surface: SurfaceShape, x: ArrayLike, y: ArrayLike, z_local: ArrayL
         the unit normal there (n_z > 0; n_x is the scalar 0.0 for meridional rays) and a bool
         array of failed rays (their values are NaN or meaningless).
     """
+    if not is_spherical(surface) and np.broadcast(x, y, z_local, kx, ky, kz).shape == ():
+        # One ray given as scalars: Newton updates arrays in place, so trace it as an array.
+        out = intersect(surface, *(np.reshape(np.asarray(v, dtype=float), 1)
+                                   for v in (x, y, z_local, kx, ky, kz)))
+        return tuple(np.reshape(v, ()) for v in out)    # type: ignore[return-value]
     meridional = np.isscalar(x) and np.isscalar(kx) and x == 0.0 and kx == 0.0
     y = np.asarray(y, dtype=float)
     z = np.asarray(z_local, dtype=float)
