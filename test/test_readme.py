@@ -4,8 +4,8 @@
 The README stays true: its parameters table is the schema's, its commands exist, configs load.
 
 The table between ``<!-- params:start -->`` and ``<!-- params:end -->`` must equal what
-``tools/gen_readme_params.py`` generates from :data:`mechdeconv_ros.params.SCHEMA` (run that
-tool after changing the schema). Every ``config/*.yaml`` must load through the same loader the
+``tools/gen_readme_params.py`` generates from :data:`mechdeconv_ros.params.SCHEMA`, and so must
+docs/parameters.md (run that tool after changing the schema). Every ``config/*.yaml`` must load through the same loader the
 CLI uses, and the paper's case files must build a lens model.
 """
 
@@ -46,6 +46,15 @@ def test_parameters_table_is_generated_from_the_schema(readme: str) -> None:
     assert gen.table_in(readme) == gen.params_table(), (
         'README parameters table is out of date: run python tools/gen_readme_params.py')
     assert gen.update(readme) == readme
+
+
+def test_parameters_page_is_generated_from_the_schema() -> None:
+    gen = load_generator()
+    page = (REPO / 'docs' / 'parameters.md').read_text(encoding='utf-8')
+    assert page == gen.parameters_page(), (
+        'docs/parameters.md is out of date: run python tools/gen_readme_params.py')
+    for spec in SCHEMA:
+        assert spec.description in page, spec.name
 
 
 def test_parameters_table_has_one_row_per_parameter(readme: str) -> None:

@@ -1,15 +1,16 @@
 # Copyright 2026 The mechdeconv_ros Authors.
 # SPDX-License-Identifier: Apache-2.0
 """
-Regenerate the parameters table of README.md from the schema (mechdeconv_ros.params.SCHEMA).
+Regenerate the parameters tables from the schema (mechdeconv_ros.params.SCHEMA).
 
-The table sits between the lines ``<!-- params:start -->`` and ``<!-- params:end -->``; the
-rest of the README is left alone. Usage::
+README.md holds one row per parameter with the first clause of its description, between the
+lines ``<!-- params:start -->`` and ``<!-- params:end -->`` (the rest of the README is left
+alone); docs/parameters.md holds the whole descriptions. Usage::
 
-    python tools/gen_readme_params.py           # rewrite README.md in place
-    python tools/gen_readme_params.py --check   # exit 1 if README.md is out of date
+    python tools/gen_readme_params.py           # rewrite both in place
+    python tools/gen_readme_params.py --check   # exit 1 if either is out of date
 
-test/test_readme.py asserts that the README table equals :func:`params_table`.
+test/test_readme.py asserts that both equal what this generates.
 """
 
 from __future__ import annotations
@@ -27,6 +28,8 @@ from mechdeconv_ros.params import ParamSpec, SCHEMA  # noqa: E402 - after the sy
 
 START = '<!-- params:start -->'
 END = '<!-- params:end -->'
+#: The generated page with the whole descriptions.
+PARAMETERS_PAGE = REPO / 'docs' / 'parameters.md'
 
 
 def _number(value: float) -> str:
@@ -77,21 +80,59 @@ def _cell(text: str) -> str:
     return text.replace('|', '\\|').replace('\n', ' ')
 
 
-def params_table() -> str:
+def short_description(spec: ParamSpec) -> str:
+    """
+    Return the first clause of a description (up to its first '.', ';' or ':').
+
+    :param spec: the parameter's spec.
+    :return: the clause, with ``Read-only.`` for read-only parameters.
+    """
+    text = spec.description
+    depth, cut = 0, len(text)
+    for i, char in enumerate(text):
+        depth += {'(': 1, ')': -1}.get(char, 0)
+        # A clause ends at '. ', '; ' or ': ' outside parentheses ('eq. 8' does not end one).
+        # A short lead-in ('Prescription mode:') keeps its clause.
+        if depth == 0 and char in '.;:' and text[i + 1:i + 2] in (' ', '') and i > 20 and \
+                not text[:i].endswith(('eq', 'e.g', 'i.e')):
+            cut = i
+            break
+    text = text[:cut] + '.'
+    return text + (' Read-only.' if spec.read_only else '')
+
+
+def params_table(full: bool = False) -> str:
     """
     Return the Markdown table of every schema parameter, in schema order.
 
+    :param full: whole descriptions (docs/parameters.md) instead of their first clause (the
+        README).
     :return: the table, one row per parameter, without a trailing newline.
     """
     rows = ['| name | type | default | range | unit | description |',
             '| --- | --- | --- | --- | --- | --- |']
     for spec in SCHEMA:
         unit = {'': '-', '1': '1'}.get(spec.unit, spec.unit)
-        description = spec.description + (' Read-only.' if spec.read_only else '')
+        description = (spec.description + (' Read-only.' if spec.read_only else '')
+                       if full else short_description(spec))
         cells = (f'`{spec.name}`', spec.type.replace('_', ' '), f'`{format_default(spec)}`',
                  format_range(spec), unit, description)
         rows.append('| ' + ' | '.join(_cell(c) for c in cells) + ' |')
     return '\n'.join(rows)
+
+
+def parameters_page() -> str:
+    """
+    Return docs/parameters.md: every parameter with its whole description.
+
+    :return: the page's text.
+    """
+    return ('# Parameters of correct_node\n\n'
+            '<!-- Generated from mechdeconv_ros/params.py by python tools/gen_readme_params.py: '
+            'do not edit. -->\n'
+            'Every parameter with its whole description, as `ros2 param describe` shows it '
+            '(the README lists the first clause). Defaults are the paper\'s Case 2.\n\n'
+            + params_table(full=True) + '\n')
 
 
 def update(text: str) -> str:
@@ -131,20 +172,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
     parser = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
     parser.add_argument('--readme', type=Path, default=REPO / 'README.md')
+    parser.add_argument('--page', type=Path, default=PARAMETERS_PAGE)
     parser.add_argument('--check', action='store_true',
                         help='do not write; exit 1 if the table is out of date')
     args = parser.parse_args(argv)
     text = args.readme.read_text(encoding='utf-8')
     new = update(text)
+    page = args.page.read_text(encoding='utf-8') if args.page.exists() else ''
+    outdated = [path for path, old, want in ((args.readme, text, new),
+                                              (args.page, page, parameters_page()))
+                if old != want]
     if args.check:
-        if new != text:
-            print(f'{args.readme}: parameters table is out of date; run '
+        for path in outdated:
+            print(f'{path}: parameters table is out of date; run '
                   'python tools/gen_readme_params.py', file=sys.stderr)
-            return 1
-        return 0
-    if new != text:
-        args.readme.write_text(new, encoding='utf-8')
-        print(f'updated the parameters table of {args.readme}')
+        return 1 if outdated else 0
+    for path in outdated:
+        path.write_text(new if path == args.readme else parameters_page(), encoding='utf-8')
+        print(f'updated the parameters table of {path}')
     return 0
 
 
