@@ -106,7 +106,7 @@ MAX_WINDOW = 32
 BRIDGE_MIN_FRACTION = 0.125
 #: Newton iterations and step halvings from an extrapolated start (it is close: few needed).
 CONTINUATION_ITERATIONS = 6
-CONTINUATION_HALVINGS = 5
+CONTINUATION_HALVINGS = 3
 #: A ray that must travel backwards by more than this to reach a surface fails.
 BACKWARD_TOLERANCE_MM = 1e-9
 
