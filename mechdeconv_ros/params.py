@@ -144,8 +144,8 @@ SCHEMA: tuple[ParamSpec, ...] = (
        'Prescription mode: conic constant k of each surface (0 sphere, -1 paraboloid, < -1 '
        'hyperboloid); empty = all spheres.', -1.0e3, 1.0e3),
     *(_a(f'lens.surfaces.asphere_a{p}', f'mm^{1 - p}',
-         f'Prescription mode: even asphere coefficient a{p} of each surface (sag term '
-         f'a{p} r^{p}); empty = all 0.', -1.0e6, 1.0e6) for p in ASPHERE_POWERS),
+         f'Prescription mode: asphere term a{p} r^{p} of each surface; empty = all 0.',
+         -1.0e6, 1.0e6) for p in ASPHERE_POWERS),
     _i('lens.stop_surface', 0, '1',
        'Prescription mode: 0-based index of the surface whose axial point the chief ray '
        'crosses (the aperture stop).', 0, 255),

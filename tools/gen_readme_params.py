@@ -109,14 +109,24 @@ def params_table(full: bool = False) -> str:
         README).
     :return: the table, one row per parameter, without a trailing newline.
     """
-    rows = ['| name | type | default | range | unit | description |',
-            '| --- | --- | --- | --- | --- | --- |']
+    if full:
+        rows = ['| name | type | default | range | unit | description |',
+                '| --- | --- | --- | --- | --- | --- |']
+    else:       # the README's: the type shows in the default (4.0, 0, [], 'raw', true)
+        rows = ['| name | default | range | description |', '| --- | --- | --- | --- |']
     for spec in SCHEMA:
         unit = {'': '-', '1': '1'}.get(spec.unit, spec.unit)
-        description = (spec.description + (' Read-only.' if spec.read_only else '')
-                       if full else short_description(spec))
-        cells = (f'`{spec.name}`', spec.type.replace('_', ' '), f'`{format_default(spec)}`',
-                 format_range(spec), unit, description)
+        if full:
+            cells: tuple[str, ...] = (
+                f'`{spec.name}`', spec.type.replace('_', ' '), f'`{format_default(spec)}`',
+                format_range(spec), unit,
+                spec.description + (' Read-only.' if spec.read_only else ''))
+        else:
+            span = format_range(spec)
+            if unit not in ('-', '1') and span != '-':
+                span += f' {unit}'
+            cells = (f'`{spec.name}`', f'`{format_default(spec)}`', span,
+                     short_description(spec))
         rows.append('| ' + ' | '.join(_cell(c) for c in cells) + ' |')
     return '\n'.join(rows)
 
