@@ -88,7 +88,7 @@ def publisher_main(width: int, height: int, rate_hz: float, transport: str) -> i
     from rclpy.signals import SignalHandlerOptions
     from sensor_msgs.msg import CompressedImage
 
-    from benchmarks.passthrough_node import sensor_qos
+    from mechdeconv_ros.frame_io import sensor_qos
     from mechdeconv_ros.image_msgs import new_output_image
 
     stop = threading.Event()

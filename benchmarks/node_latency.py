@@ -165,7 +165,7 @@ def publisher_main(width: int, height: int, rate_hz: float) -> int:
     from rclpy.signals import SignalHandlerOptions
     from sensor_msgs.msg import Image
 
-    from benchmarks.passthrough_node import sensor_qos
+    from mechdeconv_ros.frame_io import sensor_qos
     from mechdeconv_ros.image_msgs import new_output_image
 
     # Our own SIGINT handler (rclpy's would shut the context down under a running publish()

@@ -5,7 +5,7 @@ A pass-through node: the transport-only baseline of the node benchmark.
 
 It does what ``correct_node`` does minus the correction: subscribes ``image_raw`` and
 publishes every frame it receives on ``image_rect``, with the same QoS (best effort, keep
-last 1, volatile: :func:`mechdeconv_ros.correct_node.sensor_qos`) and the same transport (the
+last 1, volatile: :func:`mechdeconv_ros.frame_io.sensor_qos`) and the same transport (the
 process environment decides it). The received message is republished as it is, so the
 Python side adds no copy: what remains is rclpy's receive conversion, the executor and the
 publish, the cost every Python relay pays per frame.
@@ -23,19 +23,12 @@ from __future__ import annotations
 import argparse
 import sys
 
+from mechdeconv_ros.frame_io import sensor_qos
 import rclpy
 from rclpy.executors import (
     ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor)
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Image
-
-
-def sensor_qos() -> QoSProfile:
-    """Return correct_node's image QoS: best effort, keep last 1, volatile."""
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                      reliability=ReliabilityPolicy.BEST_EFFORT,
-                      durability=DurabilityPolicy.VOLATILE)
 
 
 class PassthroughNode(Node):

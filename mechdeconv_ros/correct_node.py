@@ -3,73 +3,51 @@
 """
 correct_node: live lens-distortion correction from the lens's physical description.
 
-Topics (relative names, so namespaces and remaps apply; ``/diagnostics`` is absolute):
-
-* subscribes ``image_raw`` (sensor_msgs/Image) -- only while an output has a subscriber,
-  unless ``lazy_subscription`` is false; with ``image_transport:=compressed`` (read at
-  start-up, as image_proc's) it subscribes ``image_raw/compressed``
-  (sensor_msgs/CompressedImage) instead, named as image_transport names it: the RESOLVED
-  ``image_raw`` plus ``/compressed``, so ``-r image_raw:=/cam/image_raw`` moves it to
-  ``/cam/image_raw/compressed``. Each frame is decoded by :mod:`mechdeconv_ros.compressed`
-  (JPEG/PNG, 8/16 bit, image_transport's and cv_bridge's format strings) and ``image_rect``
-  is published raw, in the decoded encoding; a payload that does not decode, or names an
-  encoding the node cannot produce, is refused, counted and logged (throttled);
-* publishes ``image_rect`` (same encoding, the input header), ``camera_info`` (the raw camera:
-  K and the equivalent D of the traced lens, R = I, P = [K_new | 0]) and ``camera_info_rect``
-  (the corrected image: K = K_new, D = 0, R = I, the same P), each with the input header.
-  A big-endian 16-bit or float input is published in the host's byte order (``is_bigendian``
-  says which), with the same values;
-* publishes ``image_rect/compressed`` (sensor_msgs/CompressedImage, the resolved
-  ``image_rect`` plus ``/compressed``) only while it has a subscriber: the corrected image
-  encoded as image_transport's compressed plugin does (``image_rect.compressed.format``,
-  ``.jpeg_quality``, ``.png_level``); 8-bit colour and mono8/mono16 images only;
-* publishes ``/diagnostics`` (DiagnosticArray, 1 Hz: :mod:`mechdeconv_ros.diagnostics`).
+Topics (relative names: namespaces and remaps apply; ``/diagnostics`` is absolute): in,
+``image_raw`` (sensor_msgs/Image) or, with ``image_transport:=compressed`` (read at start-up,
+as image_proc's), the RESOLVED ``image_raw`` + ``/compressed`` (sensor_msgs/CompressedImage,
+decoded by :mod:`~mechdeconv_ros.frame_io`), subscribed only while an output has a subscriber
+unless ``lazy_subscription`` is false; out, ``image_rect`` (the input's encoding and header),
+``camera_info`` (raw K and the equivalent D), ``camera_info_rect`` (K_new, D = 0),
+``image_rect/compressed`` (only while subscribed) and ``/diagnostics`` (1 Hz,
+:mod:`~mechdeconv_ros.diagnostics`). README "Node API" has the details.
 
 Wiring only: :mod:`~mechdeconv_ros.ros_params` declares the schema,
-:mod:`~mechdeconv_ros.param_services` hardens the set services, and
+:mod:`~mechdeconv_ros.param_services` hardens the set services,
 :class:`~mechdeconv_ros.live_model.LiveModel` holds values, validation, the rebuild thread,
-the atomic swap and frame-size following (its docstring: which thread touches what). The node
-spins in a SingleThreadedExecutor (on 2 vCPUs the MultiThreadedExecutor's wait loop cost 640x480
-output 30 -> 5 fps); the frames have their own mutually exclusive callback group.
-
-Lazy subscription follows the outputs' publisher matched events: with the shipped Fast DDS
-profile they came within 1 ms of a remote subscription's creation or removal, like the
-subscriber count. An rmw without them falls back to a poll every :data:`LAZY_POLL_S`.
+the atomic swap and frame-size following (its docstring: which thread touches what), and
+:mod:`~mechdeconv_ros.node_main` runs it until a signal. The node spins in a
+SingleThreadedExecutor (on 2 vCPUs the MultiThreadedExecutor's wait loop cost 640x480 output
+30 -> 5 fps); the frames have their own mutually exclusive callback group. Lazy subscription
+follows the outputs' publisher matched events (with the shipped Fast DDS profile within 1 ms
+of a remote subscription's creation or removal); an rmw without them is polled every
+:data:`LAZY_POLL_S`.
 """
 
 from __future__ import annotations
 
-import array
-import signal
-import sys
-import threading
 import time
-from typing import Any
+from typing import Any, Callable
 
 import cv2
 from diagnostic_msgs.msg import DiagnosticArray
-from mechdeconv_ros.compressed import decode, encode, UnsupportedCompressedFormatError
 from mechdeconv_ros.diagnostics import diagnostics_message, FrameStats
-from mechdeconv_ros.graph_env import keep_large_buffers
-from mechdeconv_ros.image_msgs import (
-    camera_infos_from_model, Encoding, image_to_array, MalformedImageError, OutputImagePool,
-    UnsupportedEncodingError)
+from mechdeconv_ros.frame_io import (
+    compressed_output, FrameRefused, read_compressed, read_image, sensor_qos)
+from mechdeconv_ros.image_msgs import camera_infos_from_model, Encoding, OutputImagePool
 from mechdeconv_ros.live_model import (  # noqa: F401 - MAX_SURFACES: the node's limit
     changes_of, FrameDropped, LiveModel, MAX_SURFACES)
+from mechdeconv_ros.node_main import log_function, run_node
 from mechdeconv_ros.param_services import guard_parameter_services
 from mechdeconv_ros.params import SCHEMA
 from mechdeconv_ros.remap import Rectifier
 from mechdeconv_ros.ros_params import declare_schema
 from rcl_interfaces.msg import SetParametersResult
-import rclpy
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.event_handler import PublisherEventCallbacks, UnsupportedEventTypeError
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.qos_overriding_options import QoSOverridingOptions
-from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
@@ -79,23 +57,6 @@ LAZY_POLL_S = 0.5
 DIAGNOSTICS_PERIOD_S = 1.0
 #: Minimum seconds between two log lines of the same per-frame problem.
 LOG_THROTTLE_S = 5.0
-#: Longest wait of the spin loop before it looks at the stop flag of SIGINT/SIGTERM, s.
-STOP_POLL_S = 0.1
-
-
-def sensor_qos() -> QoSProfile:
-    """
-    Return the default QoS of the image and camera-info topics.
-
-    Best effort, keep last 1, volatile: a live stream wants the newest frame, never a queue of
-    old ones, and a best-effort subscription matches reliable and best-effort publishers. Users
-    can change history, depth and reliability per topic with the ``qos_overrides.*`` parameters.
-
-    :return: a new profile.
-    """
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                      reliability=ReliabilityPolicy.BEST_EFFORT,
-                      durability=DurabilityPolicy.VOLATILE)
 
 
 class CorrectNode(Node):
@@ -119,7 +80,7 @@ class CorrectNode(Node):
         self._warned_model: Any = None
         super().__init__('correct_node', **kwargs)
         self._live = LiveModel(
-            declare_schema(self, SCHEMA), extras=camera_infos_from_model, log=self._log_line,
+            declare_schema(self, SCHEMA), extras=camera_infos_from_model, log=log_function(self),
             build_maps=self._build_maps)
         guard_parameter_services(self, self._live.start_requested_rebuild,
                                  bool(kwargs.get('allow_undeclared_parameters', False)))
@@ -206,48 +167,21 @@ class CorrectNode(Node):
         cv2.setNumThreads(threads if threads > 0 else -1)
 
     def _on_image(self, msg: Image) -> None:
-        """Correct one frame and publish it with both CameraInfos; never raises."""
-        start = time.perf_counter()
-        stats = self._stats
-        stats.frames_in += 1
-        try:
-            pixels, encoding = image_to_array(msg)
-        except UnsupportedEncodingError as err:
-            stats.rejected_encodings += 1
-            stats.last_rejected_encoding = err.encoding
-            return self._frame_error('encoding', str(err),
-                                     f'{err} ({stats.rejected_encodings} frames so far)')
-        except MalformedImageError as err:
-            stats.frames_failed += 1
-            error = f'malformed frame: {err}'
-            return self._frame_error('malformed', error, f'{error} ({stats.frames_failed} so far)')
-        except Exception as err:        # noqa: B902 - one bad frame must not stop the stream
-            stats.frames_failed += 1
-            return self._frame_error('unreadable', f'unreadable frame: {err!r}')
-        self._correct(msg.header, pixels, encoding, start)
+        """Correct one raw frame and publish it with both CameraInfos; never raises."""
+        self._on_frame(msg, read_image)
 
     def _on_compressed(self, msg: CompressedImage) -> None:
         """Decode one compressed frame, then correct and publish it; never raises."""
+        self._on_frame(msg, read_compressed)
+
+    def _on_frame(self, msg: Any, read: Callable[[Any, FrameStats], Any]) -> None:
         start = time.perf_counter()
-        stats = self._stats
-        stats.frames_in += 1
+        self._stats.frames_in += 1
         try:
-            decoded = decode(msg.format, msg.data)
-        except (UnsupportedCompressedFormatError, UnsupportedEncodingError) as err:
-            stats.rejected_encodings += 1
-            stats.last_rejected_encoding = err.encoding
-            return self._frame_error('encoding', str(err),
-                                     f'{err} ({stats.rejected_encodings} frames so far)')
-        except MalformedImageError as err:      # UndecodableImageError included
-            stats.frames_undecodable += 1
-            error = f'undecodable frame: {err}'
-            return self._frame_error('undecodable', error,
-                                     f'{error} ({stats.frames_undecodable} so far)')
-        except Exception as err:        # noqa: B902 - one bad frame must not stop the stream
-            stats.frames_undecodable += 1
-            return self._frame_error('undecodable', f'undecodable frame: {err!r}')
-        stats.add_decode_time((time.perf_counter() - start) * 1e3)
-        self._correct(msg.header, decoded.pixels, decoded.encoding, start)
+            pixels, encoding = read(msg, self._stats)
+        except FrameRefused as refused:
+            return self._frame_error(refused.kind, refused.error, refused.line)
+        self._correct(msg.header, pixels, encoding, start)
 
     def _correct(self, header: Any, pixels: Any, encoding: Encoding, start: float) -> None:
         """Correct one frame's pixels and publish them with both CameraInfos; never raises."""
@@ -279,45 +213,16 @@ class CorrectNode(Node):
             self._pub_info.publish(info_raw)
             self._pub_info_rect.publish(info_rect)
             if self._pub_compressed.get_subscription_count() > 0:
-                self._publish_compressed(out.pixels, encoding, header)
+                self._pub_compressed.publish(compressed_output(
+                    out.pixels, encoding, header, self._live.value))
+                stats.frames_out_compressed += 1
+        except FrameRefused as refused:     # the compressed output only: image_rect is out
+            self._frame_error(refused.kind, refused.error)
         except Exception as err:        # noqa: B902 - one bad frame must not stop the stream
             stats.frames_failed += 1
             return self._frame_error('correction', f'correction failed: {err}')
         stats.frames_out += 1
         stats.add_time((time.perf_counter() - start) * 1e3)
-
-    def _log_line(self, level: str, message: str) -> None:
-        """
-        Log a line of the live model at its level.
-
-        One call site per level: rclpy refuses a second severity from the same line
-        ("Logger severity cannot be changed between calls"), which a single
-        ``getattr(logger, level)(message)`` would hit on the first warning after an info.
-        """
-        logger = self.get_logger()
-        if level == 'error':
-            logger.error(message)
-        elif level == 'warning':
-            logger.warning(message)
-        else:
-            logger.info(message)
-
-    def _publish_compressed(self, pixels: Any, encoding: Encoding, header: Any) -> None:
-        """Publish the corrected pixels on image_rect/compressed; log what cannot be encoded."""
-        live = self._live
-        try:
-            fmt, data = encode(
-                pixels, encoding.name, str(live.value('image_rect.compressed.format')),
-                jpeg_quality=int(live.value('image_rect.compressed.jpeg_quality')),
-                png_level=int(live.value('image_rect.compressed.png_level')))
-        except Exception as err:        # noqa: B902 - e.g. 32FC1; image_rect is out already
-            return self._frame_error('compressed output',
-                                     f'image_rect/compressed not published: {err}')
-        msg = CompressedImage(format=fmt)
-        msg.header = header
-        msg.data = array.array('B', data)
-        self._pub_compressed.publish(msg)
-        self._stats.frames_out_compressed += 1
 
     def _frame_error(self, kind: str, error: str, line: str = '') -> None:
         """Record a problem for diagnostics; log it at most every LOG_THROTTLE_S per kind."""
@@ -366,56 +271,11 @@ class CorrectNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """
-    Run the node until SIGINT/SIGTERM (exit code 0), or exit 1 on invalid parameters.
-
-    SIGINT and SIGTERM only set a flag that the spin loop checks between callbacks: rclpy's
-    KeyboardInterrupt, raised while a received image is converted to Python, becomes a
-    RuntimeError, so Ctrl-C (or ``ros2 launch`` stopping the node) ended with a traceback and
-    exit code 1. A second SIGINT is ignored: Ctrl-C on ``ros2 launch`` reaches the node from the
-    terminal, and launch forwards one more (always when ``--noninteractive``), which used to
-    interrupt the shutdown with a KeyboardInterrupt (exit code -2). Should shutdown hang, a third
-    SIGINT, or a SIGTERM after the first signal (launch sends one after its timeout), stops the
-    process the default way.
+    Run the node until SIGINT/SIGTERM (exit 0), or exit 1 on invalid start-up parameters.
 
     :param args: command-line arguments for rclpy (``--ros-args ...``); default ``sys.argv``.
     """
-    keep_large_buffers()
-    stop = threading.Event()
-
-    def request_stop(signum: int, frame: Any) -> None:
-        stop.set()
-        signal.signal(signal.SIGINT, ignore_once)
-        signal.signal(signal.SIGTERM, signal.SIG_DFL)
-
-    def ignore_once(signum: int, frame: Any) -> None:
-        signal.signal(signal.SIGINT, signal.default_int_handler)
-
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    previous = {}
-    if threading.current_thread() is threading.main_thread():
-        previous = {sig: signal.signal(sig, request_stop)
-                    for sig in (signal.SIGINT, signal.SIGTERM)}
-    node: CorrectNode | None = None
-    failed = False
-    try:
-        node = CorrectNode()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        while not stop.is_set() and executor.context.ok():
-            executor.spin_once(timeout_sec=STOP_POLL_S)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except ValueError as err:           # invalid start-up parameters (incl. ModelError)
-        rclpy.logging.get_logger('correct_node').fatal(str(err))
-        failed = True
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
-    if failed:
-        sys.exit(1)
+    run_node(CorrectNode, 'correct_node', args)
 
 
 if __name__ == '__main__':

@@ -1,0 +1,135 @@
+# Copyright 2026 The mechdeconv_ros Authors.
+# SPDX-License-Identifier: Apache-2.0
+"""
+What a frame message becomes, and what a refused one is counted as (correct_node's frame path).
+
+:func:`read_image` (sensor_msgs/Image) and :func:`read_compressed` (sensor_msgs/
+CompressedImage, JPEG/PNG by :mod:`mechdeconv_ros.compressed`) return the pixels as a numpy
+view and their :class:`~mechdeconv_ros.image_msgs.Encoding`, or raise :class:`FrameRefused`
+after counting the frame in :class:`~mechdeconv_ros.diagnostics.FrameStats`: an unknown
+encoding in ``rejected_encodings``, a malformed Image in ``frames_failed``, an undecodable
+payload in ``frames_undecodable``. :func:`compressed_output` encodes a corrected image as
+image_transport's compressed plugin writes it; :func:`sensor_qos` is the frame topics' QoS.
+Called in the executor thread only (the frame
+callback), which owns the counters.
+"""
+
+from __future__ import annotations
+
+import array
+import time
+from typing import Any, Callable
+
+from mechdeconv_ros.compressed import decode, encode, UnsupportedCompressedFormatError
+from mechdeconv_ros.diagnostics import FrameStats
+from mechdeconv_ros.image_msgs import (
+    Encoding, image_to_array, MalformedImageError, UnsupportedEncodingError)
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import CompressedImage, Image
+
+
+def sensor_qos() -> QoSProfile:
+    """
+    Return the default QoS of the image and camera-info topics.
+
+    Best effort, keep last 1, volatile: a live stream wants the newest frame, never a queue of
+    old ones, and a best-effort subscription matches reliable and best-effort publishers. Users
+    can change history, depth and reliability per topic with the ``qos_overrides.*`` parameters.
+
+    :return: a new profile.
+    """
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                      reliability=ReliabilityPolicy.BEST_EFFORT,
+                      durability=DurabilityPolicy.VOLATILE)
+
+
+class FrameRefused(Exception):
+    """A frame that cannot be read: ``kind`` groups the log throttling, ``line`` is logged."""
+
+    def __init__(self, kind: str, error: str, line: str = '') -> None:
+        """
+        Keep the reason.
+
+        :param kind: the kind of problem (one log line per kind and throttle period).
+        :param error: the text for ``/diagnostics`` (``last_error``).
+        :param line: the log line (default ``error``).
+        """
+        super().__init__(error)
+        self.kind, self.error, self.line = kind, error, line or error
+
+
+def _unsupported(stats: FrameStats, err: Any) -> FrameRefused:
+    stats.rejected_encodings += 1
+    stats.last_rejected_encoding = err.encoding
+    return FrameRefused('encoding', str(err), f'{err} ({stats.rejected_encodings} frames so far)')
+
+
+def read_image(msg: Image, stats: FrameStats) -> tuple[Any, Encoding]:
+    """
+    Return a raw Image's pixels and encoding; count and refuse what cannot be read.
+
+    :param msg: the message.
+    :param stats: the frame counters.
+    :return: ``(pixels, encoding)``.
+    :raises FrameRefused: an unknown encoding, a malformed or unreadable frame.
+    """
+    try:
+        return image_to_array(msg)
+    except UnsupportedEncodingError as err:
+        raise _unsupported(stats, err) from None
+    except MalformedImageError as err:
+        stats.frames_failed += 1
+        error = f'malformed frame: {err}'
+        raise FrameRefused('malformed', error, f'{error} ({stats.frames_failed} so far)') from None
+    except Exception as err:        # noqa: B902 - one bad frame must not stop the stream
+        stats.frames_failed += 1
+        raise FrameRefused('unreadable', f'unreadable frame: {err!r}') from None
+
+
+def read_compressed(msg: CompressedImage, stats: FrameStats) -> tuple[Any, Encoding]:
+    """
+    Decode a CompressedImage; count and refuse what does not decode; time the decoding.
+
+    :param msg: the message.
+    :param stats: the frame counters (``decode_time_ms_*`` too).
+    :return: ``(pixels, encoding)``.
+    :raises FrameRefused: a format it cannot produce, or data that does not decode.
+    """
+    start = time.perf_counter()
+    try:
+        decoded = decode(msg.format, msg.data)
+    except (UnsupportedCompressedFormatError, UnsupportedEncodingError) as err:
+        raise _unsupported(stats, err) from None
+    except Exception as err:        # noqa: B902 - UndecodableImageError and anything else
+        stats.frames_undecodable += 1
+        error = f'undecodable frame: {err}' if isinstance(err, MalformedImageError) else \
+            f'undecodable frame: {err!r}'
+        raise FrameRefused('undecodable', error,
+                           f'{error} ({stats.frames_undecodable} so far)') from None
+    stats.add_decode_time((time.perf_counter() - start) * 1e3)
+    return decoded.pixels, decoded.encoding
+
+
+def compressed_output(pixels: Any, encoding: Encoding, header: Any,
+                      value: Callable[[str], Any]) -> CompressedImage:
+    """
+    Encode a corrected image for ``image_rect/compressed``.
+
+    :param pixels: the corrected pixels.
+    :param encoding: their encoding.
+    :param header: the input frame's header.
+    :param value: the node's parameter values by name (``image_rect.compressed.*``).
+    :return: the message.
+    :raises FrameRefused: when the encoding cannot be compressed (e.g. 32FC1).
+    """
+    try:
+        fmt, data = encode(pixels, encoding.name, str(value('image_rect.compressed.format')),
+                           jpeg_quality=int(value('image_rect.compressed.jpeg_quality')),
+                           png_level=int(value('image_rect.compressed.png_level')))
+    except Exception as err:        # noqa: B902 - image_rect is out already
+        raise FrameRefused('compressed output',
+                           f'image_rect/compressed not published: {err}') from None
+    msg = CompressedImage(format=fmt)
+    msg.header = header
+    msg.data = array.array('B', data)
+    return msg
