@@ -10,12 +10,13 @@ Run every benchmark (``make bench``) and write the full measured tables.
 
 Waits (up to ``--wait-load`` seconds, default 600) for the 1-minute load average to drop
 below 0.5, so the timings are taken on a quiet machine; then runs :mod:`benchmarks.accuracy`,
-:mod:`benchmarks.speed` and :mod:`benchmarks.node_latency`, each writing its
+:mod:`benchmarks.speed`, :mod:`benchmarks.node_latency`, :mod:`benchmarks.wide`,
+:mod:`benchmarks.vignetting` and :mod:`benchmarks.compressed_input`, each writing its
 ``results/<name>.json`` and figures, and finally prints the markdown tables (made by
 :mod:`benchmarks.report`) and writes them to ``results/README_tables.md`` and to
 ``docs/benchmarks.md`` (a generated file: the machine line at the top, figure links relative
 to it). ``--quick`` (tiny sizes, one repetition: proves the pipeline runs, its numbers mean
-nothing) writes no ``docs/benchmarks.md`` unless ``--docs`` names one. About five minutes on
+nothing) writes no ``docs/benchmarks.md`` unless ``--docs`` names one. About ten minutes on
 2 cores.
 """
 
@@ -29,7 +30,8 @@ import sys
 import time
 from typing import Any, Callable
 
-from benchmarks import accuracy, node_latency, report, speed
+from benchmarks import (
+    accuracy, compressed_input, node_latency, report, speed, vignetting, wide)
 from benchmarks.common import log, RESULTS, wait_for_low_load
 from benchmarks.report import machine_info, machine_line, write_json
 
@@ -37,6 +39,11 @@ BENCHMARKS: dict[str, tuple[Callable[..., Any], Callable[[Any], list[str]]]] = {
     'accuracy': (accuracy.run, report.accuracy_tables),
     'speed': (speed.run, report.speed_tables),
     'node': (node_latency.run, report.node_tables),
+    'wide': (wide.run, wide.tables),
+    'vignetting': (vignetting.run, vignetting.tables),
+    'compressed': (compressed_input.run,
+                   lambda doc: ['### Compressed input (JPEG q90 at 30 Hz)', '',
+                                compressed_input.table(doc), '']),
 }
 #: The generated page of full tables.
 DOCS_PAGE = Path(__file__).resolve().parents[1] / 'docs' / 'benchmarks.md'
