@@ -168,7 +168,7 @@ def agreement(rays: int) -> dict[str, Any]:
     }
     for name in ('wide_angle', 'fisheye'):
         if (config / f'{name}.yaml').exists():
-            cases[name] = (load_params_file(config / f'{name}.yaml'), 'stop', 0.95)
+            cases[name] = (load_params_file(config / f'{name}.yaml'), 'stop', None)
     out = {}
     for name, (values, method, extent) in cases.items():
         start = time.monotonic()

@@ -172,6 +172,13 @@ def test_lensfun_fit_stops_at_the_fisheye_image_circle(capsys):
     assert 0.7 < fit.fit_radius < 0.8
     assert fit.fit_radius * half <= model.curve.valid_real_mm + 0.01
     assert fit.max_error_pts < 0.5
+    # It ends where the rim starts to cut the f/1.8 beam (the whole beam still passes there),
+    # wherever the curve's samples fall.
+    end = fit.fit_radius * half
+    assert np.interp(end, curve.height_mm, curve.pupil_pass_fraction) > 0.99
+    assert np.interp(end + 0.04, curve.height_mm, curve.ri) < 0.05     # the rim ends it
+    finer = il.lensfun_fit(model, il.relative_illumination(model, samples=97))
+    assert abs(finer.fit_radius - fit.fit_radius) < 0.01 and finer.max_error_pts < 0.5
     assert main(['vignetting', '--params', str(ROOT / 'config' / 'fisheye.yaml'),
                  '--lensfun']) == 0
     assert 'max fit error' in capsys.readouterr().out
