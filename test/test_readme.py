@@ -5,8 +5,8 @@ The README stays true: its parameters table is the schema's, its commands exist,
 
 The table between ``<!-- params:start -->`` and ``<!-- params:end -->`` must equal what
 ``tools/gen_readme_params.py`` generates from :data:`mechdeconv_ros.params.SCHEMA`, and so must
-docs/parameters.md (run that tool after changing the schema). Every ``config/*.yaml`` must load through the same loader the
-CLI uses, and the paper's case files must build a lens model.
+docs/parameters.md (run that tool after changing the schema). Every ``config/*.yaml`` must
+load through the same loader the CLI uses, and the paper's case files must build a lens model.
 """
 
 from __future__ import annotations

@@ -141,7 +141,7 @@ def parameters_page() -> str:
             '<!-- Generated from mechdeconv_ros/params.py by python tools/gen_readme_params.py: '
             'do not edit. -->\n'
             'Every parameter with its whole description, as `ros2 param describe` shows it '
-            '(the README lists the first clause). Defaults are the paper\'s Case 2.\n\n'
+            "(the README lists the first clause). Defaults are the paper's Case 2.\n\n"
             + params_table(full=True) + '\n')
 
 
@@ -189,9 +189,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     text = args.readme.read_text(encoding='utf-8')
     new = update(text)
     page = args.page.read_text(encoding='utf-8') if args.page.exists() else ''
-    outdated = [path for path, old, want in ((args.readme, text, new),
-                                              (args.page, page, parameters_page()))
-                if old != want]
+    pairs = ((args.readme, text, new), (args.page, page, parameters_page()))
+    outdated = [path for path, old, want in pairs if old != want]
     if args.check:
         for path in outdated:
             print(f'{path}: parameters table is out of date; run '
