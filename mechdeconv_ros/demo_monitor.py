@@ -129,13 +129,13 @@ class Monitor(Node):
             node_fps = (counts[-1][1] - counts[0][1]) / (counts[-1][0] - counts[0][0])
         return len(lat) / max(end - start, 1e-9), lat, node_fps
 
-    def set_lens(self, node: str, values: dict[str, float],
+    def set_lens(self, node: str, values: dict[str, Any],
                  timeout_s: float) -> tuple[Any, float, float]:
         """
         Call ``/<node>/set_parameters_atomically``.
 
         :param node: ``correct_node`` or ``demo_camera``.
-        :param values: parameter name -> value.
+        :param values: parameter name -> value (a float, or a list of floats: a DOUBLE_ARRAY).
         :param timeout_s: how long to wait for the service and for the reply.
         :return: (SetParametersResult, request monotonic s, reply monotonic s).
         :raises DemoError: when the service is missing or does not answer.
@@ -144,8 +144,10 @@ class Monitor(Node):
         if not client.wait_for_service(timeout_sec=timeout_s):
             raise DemoError(f'/{node}/set_parameters_atomically is not available')
         request = SetParametersAtomically.Request()
-        request.parameters = [Parameter(name, value=float(value)).to_parameter_msg()
-                              for name, value in values.items()]
+        request.parameters = [
+            (Parameter(name, Parameter.Type.DOUBLE_ARRAY, [float(v) for v in value])
+             if isinstance(value, (list, tuple)) else Parameter(name, value=float(value)))
+            .to_parameter_msg() for name, value in values.items()]
         replied: list[float] = []
         sent = time.monotonic()
         future = client.call_async(request)

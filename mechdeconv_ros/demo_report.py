@@ -145,15 +145,88 @@ def write_png(path: Path, image: np.ndarray) -> None:
     say(f'wrote {path}')
 
 
+def first_air_gap(values: Mapping[str, Any]) -> int | None:
+    """
+    Return the index of the first air gap of a prescription, None when it has none.
+
+    The gap after surface ``i`` is ``lens.surfaces.thickness_mm[i]`` with
+    ``lens.surfaces.refractive_index[i] == 1.0`` (air after that surface); the last surface's
+    thickness is the back focal distance, not a gap between surfaces.
+
+    :param values: the parameter values.
+    :return: the index, or None.
+    """
+    indices = list(values.get('lens.surfaces.refractive_index') or [])
+    return next((i for i, n in enumerate(indices[:-1]) if n == 1.0), None)
+
+
+def lens_change(values: Mapping[str, Any], width: int, height: int, stop_offset: float,
+                thickness: float) -> tuple[dict[str, Any], Any, str]:
+    """
+    Choose the demo's lens change and build the model it gives.
+
+    Thick-lens mode sets ``lens.stop_offset_mm`` and ``lens.thickness_mm``. Prescription mode
+    (non-empty ``lens.surfaces.radius_mm``, where those two do nothing) lengthens the first
+    air gap by 5 %; when :func:`mechdeconv_ros.model.build_model` refuses that (or there is
+    no gap) it says why and changes ``output.alpha`` to 1 (0 if it is 1 already) instead.
+
+    :param values: the parameter values of the params file.
+    :param width: image width in px.
+    :param height: image height in px.
+    :param stop_offset: the new ``lens.stop_offset_mm`` (thick lens).
+    :param thickness: the new ``lens.thickness_mm`` (thick lens).
+    :return: (parameter name -> new value, the new model, what changed in words).
+    :raises DemoError: when the thick-lens change describes no usable camera.
+    """
+    from mechdeconv_ros.model import build_model, ModelError
+
+    if not values.get('lens.surfaces.radius_mm'):
+        change: dict[str, Any] = {'lens.stop_offset_mm': stop_offset,
+                                  'lens.thickness_mm': thickness}
+        try:
+            after = build_model({**values, **change}, width, height)
+        except ModelError as err:
+            raise DemoError(f'the new lens describes no usable camera: {err}') from None
+        return change, after, (
+            f"lens.stop_offset_mm {values['lens.stop_offset_mm']:g} -> {stop_offset:g} mm, "
+            f"lens.thickness_mm {values['lens.thickness_mm']:g} -> {thickness:g} mm")
+    gap = first_air_gap(values)
+    if gap is None:
+        refused = 'the prescription has no air gap between surfaces to lengthen'
+    else:
+        gaps = [float(t) for t in values['lens.surfaces.thickness_mm']]
+        old, gaps[gap] = gaps[gap], round(gaps[gap] * 1.05, 6)
+        change = {'lens.surfaces.thickness_mm': gaps}
+        try:
+            return change, build_model({**values, **change}, width, height), (
+                f'lens.surfaces.thickness_mm[{gap}] (the first air gap, after surface {gap}) '
+                f'{old:g} -> {gaps[gap]:g} mm (+5 %)')
+        except ModelError as err:
+            refused = f'lengthening the first air gap by 5 % is refused: {err}'
+    alpha = float(values['output.alpha'])
+    change = {'output.alpha': 0.0 if alpha == 1.0 else 1.0}
+    say(f"{refused}; changing output.alpha instead (the node's choice, not the lens)")
+    after = build_model({**values, **change}, width, height)
+    return change, after, f"output.alpha {alpha:g} -> {change['output.alpha']:g}"
+
+
 def lens_text(model: Any) -> str:
     """
-    Return the lens of a model in one caption: stop offset, thickness, focal length.
+    Return the lens of a model in one caption: what the demo changes, focal length, alpha.
 
     :param model: a :class:`mechdeconv_ros.model.LensModel`.
     :return: the text.
     """
-    return (f"stop offset {model.values['lens.stop_offset_mm']:g} mm, "
-            f"t = {model.values['lens.thickness_mm']:g} mm, f = {model.focal_length_mm:.3f} mm")
+    values = model.values
+    if values.get('lens.surfaces.radius_mm'):
+        gap = first_air_gap(values)
+        lens = f"{len(values['lens.surfaces.radius_mm'])} surfaces"
+        if gap is not None:
+            lens += f", air gap {gap} {values['lens.surfaces.thickness_mm'][gap]:g} mm"
+    else:
+        lens = (f"stop offset {values['lens.stop_offset_mm']:g} mm, "
+                f"t = {values['lens.thickness_mm']:g} mm")
+    return f"{lens}, f = {model.focal_length_mm:.3f} mm, alpha {values['output.alpha']:g}"
 
 
 def summary_image(raw: np.ndarray, corrected: np.ndarray, raw_after: np.ndarray,
@@ -196,3 +269,51 @@ def wait_for(condition: Callable[[], bool], timeout_s: float, what: str,
         if time.monotonic() > deadline:
             raise DemoError(f'no {what} within {timeout_s:g} s')
         time.sleep(0.02)
+
+
+def measure(monitor: Any, seconds: float, label: str, rate_hz: float,
+            children: Sequence[Any]) -> None:
+    """
+    Print the throughput and latency of image_rect over the next ``seconds``.
+
+    :param monitor: the :class:`mechdeconv_ros.demo_monitor.Monitor`.
+    :param seconds: the window.
+    :param label: what is measured, for the progress line.
+    :param rate_hz: the camera rate.
+    :param children: the processes that must stay alive.
+    """
+    say(f'measuring image_rect for {seconds:g} s ({label}) ...')
+    start = time.monotonic()
+    wait_for(lambda: time.monotonic() - start >= seconds, seconds + 5.0, 'end of window',
+             children)
+    say(window_line(*monitor.window(start, time.monotonic()), rate_hz))
+
+
+def newest_rect(monitor: Any) -> Any:
+    """
+    Return the newest image_rect the monitor received.
+
+    :param monitor: the :class:`mechdeconv_ros.demo_monitor.Monitor`.
+    :return: the Image.
+    """
+    with monitor.lock:
+        return monitor.last_rect
+
+
+def stop_children(children: Sequence[Any]) -> None:
+    """
+    Stop the processes with SIGINT, newest first, and check that each exits with status 0.
+
+    :param children: the :class:`mechdeconv_ros.graph_env.Child` processes.
+    :raises DemoError: naming each that did not, with the tail of its log.
+    """
+    say('stopping ' + ' and '.join(c.name for c in reversed(children)) + ' with SIGINT ...')
+    failed = []
+    for child in reversed(children):
+        status = child.stop(log=say)
+        say(f'  {child.name} exited with status {status}')
+        if status != 0:
+            failed.append(f'{child.name} exited with status {status}; its log:\n'
+                          + child.tail(indent='    '))
+    if failed:
+        raise DemoError('\n'.join(failed))

@@ -146,6 +146,48 @@ def test_demo_pictures_show_the_correction_before_and_after_the_change(
 
 
 @pytest.mark.ros
+def test_demo_with_the_fisheye_params_changes_the_first_air_gap_and_corrects_to_f_theta(
+        tmp_path: Path) -> None:
+    """``--params config/fisheye.yaml``: a 1280x960 prescription, corrected to f-theta."""
+    result = subprocess.run(
+        [sys.executable, '-m', 'mechdeconv_ros.demo', '--params', 'config/fisheye.yaml',
+         '--seconds', '2', '--out', str(tmp_path)],
+        cwd=REPO, env=demo_env(), stdin=subprocess.DEVNULL, capture_output=True, text=True,
+        timeout=120)
+    log = result.stdout + result.stderr
+    assert result.returncode == 0, log
+    assert 'Traceback' not in log, log
+    assert 'demo_camera publishes 1280x960 rgb8' in log, log
+    # Prescription mode: the first air gap (after surface 1, 4.591 mm) 5 % longer, sent to both
+    # nodes as one DOUBLE_ARRAY parameter.
+    assert ('lens.surfaces.thickness_mm[1] (the first air gap, after surface 1) 4.591 -> '
+            '4.82055 mm') in log, log
+    for node in ('demo_camera', 'correct_node'):
+        assert re.search(rf'/{node}/set_parameters_atomically -> successful=True', log), log
+    assert re.search(r'node rebuild time .* model revision 2', log), log
+    corrected = read_rgb(tmp_path / 'corrected.png')
+    assert corrected.shape == (960, 1280, 3)
+    assert blurred_difference(read_rgb(tmp_path / 'corrected_after_change.png'), corrected) > 5.0
+
+    # The chart is flat and at infinity; output.projection is equidistant, so a vertical grid
+    # line at pinhole column u of the camera's chart lands at c + F atan((u - c) / f_pinhole)
+    # on the centre row of the corrected frame: the lens's departure from f-theta is gone.
+    values = load_params_file(REPO / 'config' / 'fisheye.yaml')
+    node_model = build_model(values, 1280, 960)
+    camera_values = {k: v for k, v in values.items() if not k.startswith('output.')}
+    pinhole = build_model(camera_values, 1280, 960).K_new
+    edges = np.linspace(0.04 * 1280, 1280 - 1 - 0.04 * 1280, 21)
+    expected = node_model.K_new[0, 2] + node_model.K_new[0, 0] * np.arctan(
+        (edges - pinhole[0, 2]) / pinhole[0, 0])
+    row = corrected[int(node_model.K_new[1, 2]) + 25]
+    white = np.flatnonzero((row > 235).all(axis=1))
+    lines = [run.mean() for run in np.split(white, np.flatnonzero(np.diff(white) > 1) + 1)]
+    assert len(lines) >= 5, lines
+    errors = [float(np.min(np.abs(expected - x))) for x in lines]
+    assert max(errors) < 2.0, (lines, expected, errors)
+
+
+@pytest.mark.ros
 def test_demo_interrupted_stops_its_processes(tmp_path: Path) -> None:
     proc = subprocess.Popen(
         [sys.executable, '-m', 'mechdeconv_ros.demo', '--seconds', '20', '--out',
