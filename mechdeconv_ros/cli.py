@@ -154,8 +154,9 @@ def _traced_fov(report: dict[str, Any]) -> str:
     """Return the raw image's field of view as the trace sees it (None past the circle)."""
     field = report['covered_field']
     parts = [field['horizontal_deg'], field['vertical_deg'], field['diagonal_deg']]
-    text = ['beyond the image circle' if p is None else f'{p:.2f}' for p in parts]
-    return f'traced {text[0]} x {text[1]} deg (diagonal {text[2]} deg)'
+    text = ['n/a' if p is None else f'{p:.2f}' for p in parts]
+    note = '; n/a: beyond the image circle' if None in parts else ''
+    return f'traced {text[0]} x {text[1]} deg (diagonal {text[2]} deg{note})'
 
 
 def _field_line(report: dict[str, Any]) -> str:
