@@ -40,7 +40,9 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 #: Smith, Modern Lens Design (1992) p. 304: F/1.25 double Gauss, EFL 100 mm, half field
-#: 12.4 deg (US 2,771,006); indices at d, semi-apertures as published. Surface 5 is the stop.
+#: 12.4 deg (US 2,771,006); indices at d, semi-apertures as published. Surface 5 is the stop;
+#: ``lens.aperture_diameter_mm`` is its physical diameter: 44 mm, just inside the 44.34 mm
+#: that the published clear apertures pass on axis (f/1.43 here).
 DOUBLE_GAUSS = {
     'lens.surfaces.radius_mm': [93.32, 358.29, 46.32, 0.0, 28.68, 0.0, -41.32, 60.8, -55.0,
                                 90.2, -212.58],
@@ -50,7 +52,7 @@ DOUBLE_GAUSS = {
                                        1.717, 1.0],
     'lens.surfaces.semi_diameter_mm': [40.0, 40.0, 36.0, 36.0, 24.5, 24.3, 24.0, 30.0, 30.0,
                                        28.0, 28.0],
-    'lens.stop_surface': 5, 'lens.aperture_diameter_mm': 48.6, 'scene.distance_mm': 0.0,
+    'lens.stop_surface': 5, 'lens.aperture_diameter_mm': 44.0, 'scene.distance_mm': 0.0,
     'sensor.pixel_size_x_um': 18.0, 'sensor.pixel_size_y_um': 18.0,
     'sensor.width_px': 0, 'sensor.height_px': 0,
 }
