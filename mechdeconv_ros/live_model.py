@@ -391,9 +391,14 @@ class LiveModel:
                                         daemon=True)
         self._thread.start()
 
-    def stop(self, timeout: float = 10.0) -> None:
+    def stop(self, timeout: float = 2.0) -> None:
         """
-        Stop the rebuild thread after its current build, and join it.
+        Stop the rebuild thread after its current work, and join it for at most ``timeout``.
+
+        The thread may be computing a summary for diagnostics (seconds for a fisheye or a
+        256-surface prescription), which a stopping node does not need: it is a daemon thread
+        that writes nothing outside this object, so the node does not wait for it (a node
+        must exit within a few seconds of SIGINT/SIGTERM, as ``ros2 launch`` expects).
 
         :param timeout: longest wait for the join, s.
         """
