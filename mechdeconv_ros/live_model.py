@@ -37,20 +37,23 @@ Threading rule (the one rule; every shared field follows it):
   ``model_for_frame`` and ``status``; it owns the ``extras`` objects of the active model
   (e.g. it stamps the CameraInfo headers).
 * **rebuild thread** (``mechdeconv-rebuild``, started by :meth:`LiveModel.start`): builds from
-  a snapshot taken under the lock, installs under the lock, computes model summaries and warms
-  the allocator; it calls nothing but the injected builders and the ``log`` function.
+  a snapshot taken under the lock, installs under the lock and warms the allocator; it calls
+  nothing but the injected builders and the ``log`` function.
+* **summary thread** (``mechdeconv-summary``, started with it): computes the summary of the
+  model in use for diagnostics (``model.report()``: seconds for a fisheye or a long
+  prescription) and logs its warnings once, so a parameter set never waits for a summary.
 * **signal path**: never touches the model; it only sets the spin loop's stop flag, and the
   executor thread then calls :meth:`LiveModel.stop` (through ``destroy_node``).
 
-Every field that both threads use is read and written under the one lock (a Condition),
+Every field that two threads use is read and written under the one lock (a Condition),
 except the ``active`` reference, which a frame reads once without the lock (one atomic read;
 the record is immutable), so a frame never mixes two models. Fields only one thread uses
-(``_failed_build``: executor; ``_warmed_size``, ``_logged_warnings``: rebuild thread, after
-the constructor) need no lock.
+(``_failed_build``: executor; ``_warmed_size``: rebuild thread; ``_logged_warnings``: summary
+thread, after the constructor) need no lock.
 
 Warnings: a model's warnings (unusual but possible values, docs/design.md section 7, and the
 summary's depth-of-field and valid-field notes) go to ``log`` once, when they appear: the start-up
-model's in the constructor, later ones when the rebuild thread summarises a new model.
+model's in the constructor, later ones when the summary thread summarises a new model.
 """
 
 from __future__ import annotations
@@ -72,8 +75,9 @@ NOMINAL_SIZE = (640, 480)
 #: can index. Validating a set traces every surface in the executor thread (about 0.2 ms per
 #: surface), so an unbounded array would stall the frames for as long as the sender likes.
 MAX_SURFACES = int(SPECS['lens.stop_surface'].maximum) + 1
-#: Name of the rebuild thread.
+#: Names of the rebuild thread and of the summary thread.
 THREAD_NAME = 'mechdeconv-rebuild'
+SUMMARY_THREAD_NAME = 'mechdeconv-summary'
 
 #: ``build_model(values, width, height) -> LensModel`` (may raise ValueError).
 ModelBuilder = Callable[[Mapping[str, Any], int, int], Any]
@@ -199,7 +203,9 @@ class LiveModel:
         self._rebuild_requested = False
         self._rebuild_pending = False
         self._report_wanted = False
+        self._warm_wanted = False
         self._busy = False
+        self._summarizing = False
         self._stopping = False
         self._input_size: tuple[int, int] | None = None
         self._active: ActiveModel | None = None
@@ -212,12 +218,12 @@ class LiveModel:
         self._report: tuple[int, dict[str, Any]] | None = None
         self._failed_build: tuple[int, int, int] | None = None    # executor thread only
         self._warmed_size: tuple[int, int] | None = None          # rebuild thread only
-        self._thread: threading.Thread | None = None
+        self._threads: list[threading.Thread] = []
         self.startup_model = self._build_model(self._values, *self._validation_size())
         # Warnings (unusual but possible values) are logged once, when they appear: those of
-        # the start-up values now, later ones when the rebuild thread summarises a new model.
+        # the start-up values now, later ones when the summary thread summarises a new model.
         self._logged_warnings: tuple[str, ...] = tuple(
-            getattr(self.startup_model, 'warnings', ()))           # rebuild thread after start
+            getattr(self.startup_model, 'warnings', ()))           # summary thread after start
         for warning in self._logged_warnings:
             self._say('warning', warning)
         if sensor_size_fixed(self._values):
@@ -358,11 +364,11 @@ class LiveModel:
 
     def status(self) -> LiveStatus:
         """
-        Return a snapshot for diagnostics; ask the rebuild thread for a missing summary.
+        Return a snapshot for diagnostics; ask the summary thread for a missing summary.
 
         The summary (tolerance propagation, depth of field, ...) costs a few ms for the thick
         lens but grows with the surfaces of a prescription (about 2.4 s for 256), so it is
-        computed only in the rebuild thread, after the swap: never on the path from a parameter
+        computed only in the summary thread, after the swap: never on the path from a parameter
         set to the first corrected frame, and never in the executor, where it would hold up the
         frames.
 
@@ -383,42 +389,46 @@ class LiveModel:
                 rebuild_pending=self._rebuild_pending, input_size=self._input_size,
                 rebuild_error=self._rebuild_error, report=report)
 
-    # -- the rebuild thread ----------------------------------------------------------------------
+    # -- the rebuild and summary threads ---------------------------------------------------------
 
     def start(self) -> None:
-        """Start the rebuild thread (a daemon: it never keeps the process alive)."""
-        self._thread = threading.Thread(target=self._rebuild_loop, name=THREAD_NAME,
-                                        daemon=True)
-        self._thread.start()
+        """Start the rebuild and summary threads (daemons: they never keep the process alive)."""
+        self._threads = [threading.Thread(target=loop, name=name, daemon=True)
+                         for loop, name in ((self._rebuild_loop, THREAD_NAME),
+                                            (self._summary_loop, SUMMARY_THREAD_NAME))]
+        for thread in self._threads:
+            thread.start()
 
     def stop(self, timeout: float = 2.0) -> None:
         """
-        Stop the rebuild thread after its current work, and join it for at most ``timeout``.
+        Stop the threads after their current work, and join them for at most ``timeout``.
 
-        The thread may be computing a summary for diagnostics (seconds for a fisheye or a
-        256-surface prescription), which a stopping node does not need: it is a daemon thread
-        that writes nothing outside this object, so the node does not wait for it (a node
-        must exit within a few seconds of SIGINT/SIGTERM, as ``ros2 launch`` expects).
+        The summary thread may be computing a summary for diagnostics (seconds for a fisheye
+        or a 256-surface prescription), which a stopping node does not need: the threads are
+        daemons that write nothing outside this object, so the node does not wait for them
+        (a node must exit within a few seconds of SIGINT/SIGTERM, as ``ros2 launch`` expects).
 
-        :param timeout: longest wait for the join, s.
+        :param timeout: longest wait for both joins together, s.
         """
         with self._lock:
             self._stopping = True
             self._lock.notify_all()
-        if self._thread is not None:
-            self._thread.join(timeout=timeout)
+        deadline = time.monotonic() + timeout
+        for thread in self._threads:
+            thread.join(timeout=max(0.0, deadline - time.monotonic()))
 
     def wait_idle(self, timeout: float) -> bool:
         """
-        Wait until the rebuild thread has no work left (for tests and tools).
+        Wait until both threads have no work left (for tests and tools).
 
         :param timeout: longest wait, s.
         :return: True when idle, False on timeout.
         """
         with self._lock:
             return self._lock.wait_for(
-                lambda: self._stopping or not (self._rebuild_pending or self._report_wanted
-                                               or self._busy), timeout)
+                lambda: self._stopping or not (
+                    self._rebuild_pending or self._report_wanted or self._warm_wanted
+                    or self._busy or self._summarizing), timeout)
 
     def _rebuild_loop(self) -> None:
         """Rebuild the model whenever an accepted set asks for it; coalesce bursts."""
@@ -426,20 +436,34 @@ class LiveModel:
             with self._lock:
                 self._busy = False
                 self._lock.notify_all()
-                while not (self._rebuild_pending or self._report_wanted or self._stopping):
+                while not (self._rebuild_pending or self._warm_wanted or self._stopping):
                     self._lock.wait()
                 if self._stopping:
                     return
                 self._busy = True
                 rebuild, self._rebuild_pending = self._rebuild_pending, False
-                self._report_wanted = False
+                self._warm_wanted = False
                 values, generation = dict(self._values), self._values_generation
                 size, active = self._input_size, self._active
             if rebuild:
                 self._rebuild(values, generation, size, active)
-            # The model in use gets its summary (cached per revision: free when it has one).
-            self._summarize(self._active)
             self._warm_allocator(self._active)
+
+    def _summary_loop(self) -> None:
+        """Summarise the model in use whenever a new one is installed or diagnostics ask."""
+        while True:
+            with self._lock:
+                self._summarizing = False
+                self._lock.notify_all()
+                while not (self._report_wanted or self._stopping):
+                    self._lock.wait()
+                if self._stopping:
+                    return
+                self._summarizing = True
+                self._report_wanted = False
+                active = self._active
+            # Cached per revision: free when the model in use has its summary already.
+            self._summarize(active)
 
     def _rebuild(self, values: dict[str, ParamValue], generation: int,
                  size: tuple[int, int] | None, active: ActiveModel | None) -> None:
@@ -468,7 +492,7 @@ class LiveModel:
             self._install_locked(candidate)
 
     def _summarize(self, active: ActiveModel | None) -> None:
-        """Compute the summary of the model in use, once per revision (rebuild thread)."""
+        """Compute the summary of the model in use, once per revision (summary thread)."""
         if active is None:
             return
         with self._lock:
@@ -556,7 +580,8 @@ class LiveModel:
         self._active = installed                # the one atomic swap frames see
         self._last_rebuild_ms = candidate.build_ms
         self._rebuild_error = ''
-        self._report_wanted = True              # the rebuild thread summarises it
+        self._report_wanted = True              # the summary thread summarises it
+        self._warm_wanted = True                # the rebuild thread warms a new size
         if installed.values_generation < self._values_generation:
             self._rebuild_pending = True
         self._lock.notify_all()

@@ -404,6 +404,42 @@ def test_a_failing_logger_does_not_stop_the_rebuild_thread(gate: Gate) -> None:
         live.stop()
 
 
+class SlowSummaryModel(FakeModel):
+    """A model whose summary blocks until the test releases it."""
+
+    release = threading.Event()
+    started = threading.Event()
+
+    def report(self) -> dict[str, Any]:
+        """Block (as a fisheye's seconds-long summary would), then summarise."""
+        SlowSummaryModel.started.set()
+        assert SlowSummaryModel.release.wait(WAIT_S)
+        return super().report()
+
+
+def test_a_set_is_built_while_a_summary_is_being_computed(gate: Gate) -> None:
+    """A seconds-long summary (its own thread) never holds up the next rebuild."""
+    gate.hold = False
+    SlowSummaryModel.release.clear()
+    SlowSummaryModel.started.clear()
+    live = LiveModel(values_with(), build_model=lambda v, w, h: SlowSummaryModel(v, w, h),
+                     build_maps=gate, extras=lambda model: None, log=lambda *a: None)
+    live.start()
+    try:
+        live.model_for_frame(640, 480)
+        assert SlowSummaryModel.started.wait(WAIT_S)        # the summary thread is blocked
+        live.validate({OFFSET: 0.3})
+        live.commit({OFFSET: 0.3})
+        assert live.start_requested_rebuild()
+        with live._lock:
+            assert live._lock.wait_for(
+                lambda: live._active is not None and live._active.model.offset == 0.3, WAIT_S)
+        assert not SlowSummaryModel.release.is_set(), 'built while the summary still ran'
+    finally:
+        SlowSummaryModel.release.set()
+        live.stop()
+
+
 def test_stop_ends_the_thread_even_during_a_build(gate: Gate) -> None:
     live = make_live(gate)
     first_frame(live, gate)
@@ -416,5 +452,5 @@ def test_stop_ends_the_thread_even_during_a_build(gate: Gate) -> None:
     gate.release(2)
     stopper.join(WAIT_S)
     assert not stopper.is_alive()
-    assert not live._thread.is_alive(), 'stop must end the rebuild thread'
+    assert not any(t.is_alive() for t in live._threads), 'stop must end both threads'
     assert live.status().active.model.offset == 0.3     # the build under way was installed
