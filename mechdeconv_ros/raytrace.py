@@ -101,6 +101,11 @@ FIRST_PASS_HALVINGS = 8
 FIRST_PASS_ITERATIONS = 12
 #: Largest window of samples aimed together by continuation.
 MAX_WINDOW = 32
+#: Longest step of field angle (rad) between consecutive samples continued from one another:
+#: wider gaps of a sparse batch get guide samples (traced, then dropped) that split them to at
+#: most this, so an angle's chief ray does not depend on the other angles asked with it (the
+#: model's 512-sample trace steps 0.35 deg at most and gets none).
+MAX_CONTINUATION_STEP_RAD = math.radians(1.0)
 #: Shortest continuation step towards a sample, relative to the step from the last solved
 #: sample (three halvings; see _bridge).
 BRIDGE_MIN_FRACTION = 0.125
@@ -640,8 +645,12 @@ def _aim_continued(problem: _ChiefRayProblem, field: np.ndarray,
     fails from an extrapolated start too: the branch of chief rays that starts on the axis ends
     there. ``guide`` (field variable, offset) of solved chief rays replaces the paraxial starts
     inside its range by interpolation (a dense trace after a coarse one converges in one or two
-    steps).
+    steps). Gaps between samples (and from the axis) wider than MAX_CONTINUATION_STEP_RAD of
+    field angle are split by extra samples (see :func:`_split_gaps`), aimed with the others and
+    dropped from the result: a sparse batch continues in the steps of a dense one.
     """
+    count = field.size
+    field = np.concatenate((field, _split_gaps(problem, field)))
     start = None
     if guide is not None and guide[0].size > 1:
         known, offsets = guide
@@ -684,7 +693,35 @@ def _aim_continued(problem: _ChiefRayProblem, field: np.ndarray,
                     break
             height[todo] = result
             window = min(2 * window, MAX_WINDOW) if np.isfinite(result).all() else 4
-    return height
+    return height[:count]
+
+
+def _split_gaps(problem: _ChiefRayProblem, field: np.ndarray) -> np.ndarray:
+    """
+    Return extra field samples that split the wide gaps between the given ones.
+
+    On each side of the axis, the angles theta of the finite samples (theta = field at
+    infinity, arctan(field) for a finite distance) and the axis itself, in order of |theta|,
+    leave gaps; one wider than MAX_CONTINUATION_STEP_RAD is split evenly into the fewest steps
+    no longer than that. Empty for a dense batch.
+    """
+    finite = field[np.isfinite(field)]
+    theta = finite if problem.infinite else np.arctan(finite)
+    extra = []
+    for sign in (1.0, -1.0):
+        side = np.unique(theta[theta * sign > 0] * sign)
+        if side.size == 0:
+            continue
+        edges = np.concatenate(([0.0], side))
+        gaps = np.diff(edges)
+        for low, gap in zip(edges[:-1][gaps > MAX_CONTINUATION_STEP_RAD],
+                            gaps[gaps > MAX_CONTINUATION_STEP_RAD]):
+            steps = math.ceil(gap / MAX_CONTINUATION_STEP_RAD)
+            extra.append(sign * (low + gap * np.arange(1, steps) / steps))
+    if not extra:
+        return np.empty(0)
+    split = np.concatenate(extra)
+    return split if problem.infinite else np.tan(split)
 
 
 def _bridge(problem: _ChiefRayProblem, before: tuple[float, float],
