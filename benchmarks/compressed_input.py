@@ -38,7 +38,7 @@ from typing import Any, Sequence
 
 from benchmarks.common import log, RESULTS
 from benchmarks.node_latency import (
-    _run_window, CASE2_YAML, Probe, READY_TIMEOUT_S, start_child)
+    _run_window, CASE2_YAML, paced_publish, Probe, READY_TIMEOUT_S, start_child)
 from mechdeconv_ros.graph_env import graph_env, pick_domain_id
 
 SIZES = ((1280, 720), (1920, 1080))
@@ -107,20 +107,8 @@ def publisher_main(width: int, height: int, rate_hz: float, transport: str) -> i
         msg, topic = out.msg, 'image_raw'
     msg.header.frame_id = 'bench_optical_frame'
     pub = node.create_publisher(type(msg), topic, sensor_qos())
-    period = 1.0 / rate_hz
-    count = 0
-    start = next_t = time.monotonic()
-    while not stop.is_set():
-        delay = next_t - time.monotonic()
-        if delay > 0 and stop.wait(delay):
-            break
-        next_t += period
-        if time.monotonic() - next_t > period:       # fell behind: do not burst
-            next_t = time.monotonic()
-        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(time.time_ns(), 1_000_000_000)
-        pub.publish(msg)
-        count += 1
-    print(json.dumps({'published': count, 'seconds': time.monotonic() - start}), flush=True)
+    count, seconds = paced_publish(pub, msg, rate_hz, stop)
+    print(json.dumps({'published': count, 'seconds': seconds}), flush=True)
     node.destroy_node()
     rclpy.try_shutdown()
     return 0

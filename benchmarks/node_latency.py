@@ -182,10 +182,28 @@ def publisher_main(width: int, height: int, rate_hz: float) -> int:
                        ).astype(np.uint8)
     msg = out.msg
     msg.header.frame_id = 'bench_optical_frame'
+    count, seconds = paced_publish(pub, msg, rate_hz, stop)
+    print(json.dumps({'published': count, 'seconds': seconds}), flush=True)
+    node.destroy_node()
+    rclpy.try_shutdown()
+    return 0
+
+
+def paced_publish(pub: Any, msg: Any, rate_hz: float, stop: Any) -> tuple[int, float]:
+    """
+    Publish ``msg`` at ``rate_hz`` (0: flat out), stamped at each publish, until ``stop``.
+
+    A publisher that falls behind does not burst to catch up: the next period starts now.
+
+    :param pub: the publisher.
+    :param msg: the message (its header stamp is set each time).
+    :param rate_hz: the rate; 0 or less publishes as fast as it can.
+    :param stop: a ``threading.Event`` that ends the loop.
+    :return: ``(messages published, seconds)``.
+    """
     period = 1.0 / rate_hz if rate_hz > 0 else 0.0
     count = 0
-    start = time.monotonic()
-    next_t = start
+    start = next_t = time.monotonic()
     while not stop.is_set():
         if period:
             delay = next_t - time.monotonic()
@@ -194,15 +212,10 @@ def publisher_main(width: int, height: int, rate_hz: float) -> int:
             next_t += period
             if time.monotonic() - next_t > period:       # fell behind: do not burst
                 next_t = time.monotonic()
-        now = time.time_ns()
-        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(now, 1_000_000_000)
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(time.time_ns(), 1_000_000_000)
         pub.publish(msg)
         count += 1
-    seconds = time.monotonic() - start
-    print(json.dumps({'published': count, 'seconds': seconds}), flush=True)
-    node.destroy_node()
-    rclpy.try_shutdown()
-    return 0
+    return count, time.monotonic() - start
 
 
 # ---------------------------------------------------------------------------------------------

@@ -3,9 +3,10 @@
 """
 Decode (and encode) sensor_msgs/CompressedImage payloads the way image_transport does.
 
-This module imports no rclpy and no message type: it takes the message's ``format`` string and
-its ``data`` bytes and returns a numpy image plus the raw ``Image.encoding`` it stands for, so
-it is tested without a graph and the node is thin wiring around it.
+This module imports no rclpy (only the encodings of :mod:`mechdeconv_ros.image_msgs`): it takes
+the message's ``format`` string and its ``data`` bytes and returns a numpy image plus the raw
+``Image.encoding`` it stands for, so it is tested without a graph and the node is thin wiring
+around it.
 
 ``format`` strings, as written by the publishers a robot meets:
 

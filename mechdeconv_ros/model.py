@@ -61,7 +61,7 @@ from mechdeconv_ros.params import (
     ASPHERE_POWERS, check_values, INTERPOLATIONS, MAX_FRAME_PIXELS, ParamValue)
 from mechdeconv_ros.raytrace import (
     image_plane, paraxial, Prescription, Surface, trace_field, trace_field_angles, vertex_z)
-from mechdeconv_ros.surfaces import domain_limit_mm
+from mechdeconv_ros.surfaces import domain_limit_mm, is_spherical
 import numpy as np
 import numpy.typing as npt
 import yaml
@@ -937,49 +937,29 @@ FAR_STOP_FOCAL_LENGTHS = 1.0
 LIMIT_SLACK = 1e-9
 
 
-def _rim_mm(surface: Surface) -> float:
-    """
-    Return the largest semi-aperture a surface can have (inf when unbounded).
-
-    A sphere ends at its hemisphere, ``|r|``; a conic of constant k > -1 at
-    ``1 / (|c| sqrt(1 + k))`` (where ``1 - (1 + k) c^2 a^2`` reaches 0); a flat surface, a
-    paraboloid and a hyperboloid never end. (``conic`` and ``asphere`` are read when the
-    surface has them.)
-    """
-    c = surface.curvature_per_mm
-    k = float(getattr(surface, 'conic', 0.0))
-    if c == 0.0 or 1.0 + k <= 0.0:
-        return math.inf
-    return 1.0 / (abs(c) * math.sqrt(1.0 + k))
-
-
 def _sag(surface: Surface, height_mm: float) -> float:
     """
     Return the sagitta of a surface at height ``a``: ``c a^2 / (1 + sqrt(1 - (1 + k) c^2 a^2))``.
 
     For a sphere that is ``r - sign(r) sqrt(r^2 - a^2)``; even asphere terms ``a4 a^4 + ...``
-    are added when the surface has them. Beyond its rim (:func:`_rim_mm`) a surface is
-    continued by a flat bevel, so the sagitta stays at its rim value there.
+    are added. Beyond its rim (:func:`~mechdeconv_ros.surfaces.domain_limit_mm`) a surface is
+    continued by a flat bevel, so the sagitta stays at its rim value there. (Scalar, and
+    clamped at the rim where :func:`mechdeconv_ros.surfaces.sag` would round to NaN.)
     """
     c = surface.curvature_per_mm
-    k = float(getattr(surface, 'conic', 0.0))
-    a = min(abs(height_mm), _rim_mm(surface))
+    k = surface.conic
+    a = min(abs(height_mm), domain_limit_mm(surface))
     out = c * a * a / (1.0 + math.sqrt(max(0.0, 1.0 - (1.0 + k) * c * c * a * a)))
-    for power, coefficient in enumerate(getattr(surface, 'asphere', ()) or (), start=2):
+    for power, coefficient in enumerate(surface.asphere, start=2):
         out += float(coefficient) * a ** (2 * power)
     return out
 
 
-def _is_sphere(surface: Surface) -> bool:
-    return not float(getattr(surface, 'conic', 0.0)) and not any(
-        getattr(surface, 'asphere', ()) or ())
-
-
 def _shape(surface: Surface) -> str:
     """Name a surface's shape for a reason: 'a spherical surface of radius 4 mm'."""
-    if _is_sphere(surface):
+    if is_spherical(surface):
         return f'a spherical surface of radius {surface.radius_mm:g} mm'
-    return f'a conic surface (k = {float(getattr(surface, "conic", 0.0)):g}) of radius ' \
+    return f'a conic surface (k = {surface.conic:g}) of radius ' \
            f'{surface.radius_mm:g} mm'
 
 
@@ -1151,12 +1131,12 @@ def _check_physical(vals: Mapping[str, Any], prescription: Prescription, para: A
     # Clear apertures: a sphere is at most 2|r| wide; a given semi-diameter bounds its surface.
     surfaces = prescription.surfaces
     for i, surface in enumerate(surfaces):
-        semi, rim = surface.semi_diameter_mm, _rim_mm(surface)
+        semi, rim = surface.semi_diameter_mm, domain_limit_mm(surface)
         if semi > rim * (1.0 + LIMIT_SLACK):
             raise ModelError('lens.surfaces.semi_diameter_mm',
                              f'surface {i}: a clear semi-diameter of {semi:g} mm is wider than '
                              f'{_shape(surface)} can be (at most '
-                             + (f'|r| = {rim:.6g} mm, a hemisphere)' if _is_sphere(surface)
+                             + (f'|r| = {rim:.6g} mm, a hemisphere)' if is_spherical(surface)
                                 else f'{rim:.6g} mm, its rim)'))
     d_a = float(vals['lens.aperture_diameter_mm'])
     h, u = _marginal_ray(prescription, distance, para.front_principal_z_mm)
@@ -1175,13 +1155,13 @@ def _check_physical(vals: Mapping[str, Any], prescription: Prescription, para: A
     real = {i for element in elements for i in element}
     bound, culprit, at = math.inf, '', 0
     for i, surface in enumerate(surfaces):
-        semi, rim = surface.semi_diameter_mm, _rim_mm(surface)
+        semi, rim = surface.semi_diameter_mm, domain_limit_mm(surface)
         if heights[i] <= 0.0:
             continue
         if i in real and rim / heights[i] < bound:
             bound, at = rim / heights[i], i
             culprit = (f'the {2 * rim:.6g} mm diameter '
-                       f'{"(2|r|) " if _is_sphere(surface) else ""}of surface {i}, '
+                       f'{"(2|r|) " if is_spherical(surface) else ""}of surface {i}, '
                        f'{_shape(surface)}')
         if semi > 0.0 and semi / heights[i] < bound:
             bound, at = semi / heights[i], i

@@ -118,11 +118,8 @@ def lens_system(prescription: Prescription, stop_radius_mm: float,
 
 def _mirror(surface: Surface) -> Surface:
     """Return the surface seen from behind: every sag coefficient negated."""
-    changes = {'radius_mm': -float(surface.radius_mm)}
-    asphere = getattr(surface, 'asphere', None)
-    if asphere is not None:
-        changes['asphere'] = tuple(-float(a) for a in asphere)
-    return dataclasses.replace(surface, **changes)
+    return dataclasses.replace(surface, radius_mm=-float(surface.radius_mm),
+                               asphere=tuple(-float(a) for a in surface.asphere))
 
 
 def reversed_system(system: System, z0_mm: float, free_exit: bool = False) -> System:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from benchmarks import vignetting as vignetting_bench
 from mechdeconv_ros import illumination as il
 from mechdeconv_ros import raytrace as rt
 from mechdeconv_ros import trace3d
@@ -146,18 +147,9 @@ def test_forward_flux_agrees_on_a_clipped_triplet():
     assert curve.corner_ri < 0.8
 
 
-#: A retrofocus wide-angle lens (f = 10.9 mm, 85 deg diagonal on 16 x 12 mm) whose front
-#: element's rim clips the corner beams: a negative meniscus, a positive doublet-like pair,
-#: the stop on a flat dummy surface, a positive rear element. Designed for this test.
-WIDE = {
-    'lens.surfaces.radius_mm': [40.0, 11.0, 30.0, -60.0, 0.0, 40.0, -14.0],
-    'lens.surfaces.thickness_mm': [2.0, 14.0, 5.0, 4.0, 4.0, 5.0, 0.0],
-    'lens.surfaces.refractive_index': [1.6, 1.0, 1.7, 1.0, 1.0, 1.6, 1.0],
-    'lens.surfaces.semi_diameter_mm': [18.0, 9.5, 7.0, 6.0, 0.0, 6.0, 7.0],
-    'lens.stop_surface': 4, 'lens.aperture_diameter_mm': 6.0, 'scene.distance_mm': 0.0,
-    'sensor.width_px': 1600, 'sensor.height_px': 1200,
-    'sensor.pixel_size_x_um': 10.0, 'sensor.pixel_size_y_um': 10.0,
-}
+#: The retrofocus test lens whose front rim clips the corner beams (one definition, shared
+#: with the vignetting benchmark).
+WIDE = vignetting_bench.WIDE
 
 
 def _stop_reference(values, stop_cosine, rays=1_500_000, bins=8):

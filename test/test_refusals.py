@@ -240,7 +240,9 @@ def test_fast_aperture_warns():
 def test_existing_configs_build_without_refusal():
     from mechdeconv_ros.params import load_params_file
     from pathlib import Path
-    for path in sorted((Path(__file__).parents[1] / 'config').glob('*.yaml')):
+    paths = sorted((Path(__file__).parents[1] / 'config').glob('*.yaml'))
+    assert paths
+    for path in paths:
         build_model(load_params_file(path))
 
 
@@ -248,7 +250,8 @@ def test_rim_and_sag_of_conics_and_aspheres():
     """The rim and sag helpers read conic and asphere terms when a surface has them."""
     from types import SimpleNamespace
 
-    from mechdeconv_ros.model import _rim_mm, _sag
+    from mechdeconv_ros.model import _sag
+    from mechdeconv_ros.surfaces import domain_limit_mm as _rim_mm
 
     def surface(radius, conic=0.0, asphere=()):
         return SimpleNamespace(radius_mm=radius, curvature_per_mm=1.0 / radius if radius else 0.0,
