@@ -151,7 +151,9 @@ class CorrectNode(Node):
         Runs in the rebuild thread (or in the executor for a new frame size); the gain map is
         replicated here for the channel count of the last frame, so the first frame after
         the swap does not pay for it. A gain limit that ends the corrected field inside the
-        image is logged once per model.
+        image is logged once per model. Threads: ``_channels`` is written by the executor only
+        (one int, read here as a hint); ``_warned_model`` only suppresses a repeated log line,
+        so a race between the two callers at worst logs it twice.
         """
         rectifier = Rectifier(model)
         if rectifier.gain is not None:

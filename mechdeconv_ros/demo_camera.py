@@ -40,13 +40,13 @@ pixels are rendered (and compressed) once per model and each tick only sets ``he
 from __future__ import annotations
 
 import array
-import sys
 from typing import Any, Sequence
 
 import cv2
 from mechdeconv_ros.compressed import CODECS, DEFAULT_JPEG_QUALITY, DEFAULT_PNG_LEVEL, encode
 from mechdeconv_ros.image_msgs import ImageFormatError, new_output_image, OutputImage
 from mechdeconv_ros.model import build_model, LensModel, ModelError
+from mechdeconv_ros.node_main import run_node
 from mechdeconv_ros.params import check_values, load_params_file, ParamSpec, SCHEMA
 from mechdeconv_ros.plots import grid_image
 from mechdeconv_ros.remap import distortion_maps
@@ -55,8 +55,6 @@ import numpy as np
 import numpy.typing as npt
 from rcl_interfaces.msg import (
     FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType, SetParametersResult)
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
@@ -398,29 +396,17 @@ class DemoCamera(Node):
         self._publisher.publish(msg)
 
 
-def main(args: Sequence[str] | None = None) -> int:
+def main(args: Sequence[str] | None = None) -> None:
     """
-    Run the demo camera until Ctrl-C.
+    Run the demo camera until SIGINT/SIGTERM (exit 0), or exit 1 when it describes no camera.
+
+    Stopped as correct_node is (:func:`mechdeconv_ros.node_main.run_node`): a signal only sets
+    a flag the spin loop checks, so Ctrl-C or ``ros2 launch`` never ends it with a traceback.
 
     :param args: command-line arguments, ``--ros-args`` included (default ``sys.argv``).
-    :return: exit status: 0 after a clean shutdown, 1 when the parameters describe no camera.
     """
-    rclpy.init(args=list(args) if args is not None else None)
-    node = None
-    try:
-        node = DemoCamera()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except ValueError as err:       # ModelError included: a bad start-up configuration
-        print(f'demo_camera: error: {err}', file=sys.stderr)
-        return 1
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    run_node(DemoCamera, 'demo_camera', list(args) if args is not None else None)
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    main()
