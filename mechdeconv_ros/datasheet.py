@@ -23,7 +23,18 @@ Beyond the last point nothing is extrapolated: the valid field ends there.
 
 Relative illumination (optional ``lens.datasheet.relative_illumination``, same length, > 0,
 <= 1.5): linear in the field angle between the points, 1 on the axis when the table starts
-past it, held at its last value beyond the table's last point (where the field ends anyway).
+past it; beyond the table's last point nothing is known (0: the field ends there anyway).
+
+The lens source (:class:`TableSource`, docs/design.md section 6.1): f from the table, both
+principal planes at z = 0, the paraxial image plane by the Gaussian v = f l / (l - f). The
+table is for a scene at infinity; for a finite scene the heights are scaled by v / f (the
+lens refocused by moving it; the change of distortion with the scene distance is not known
+and ignored). What needs surfaces does not apply and says so: tolerances (sigmas NaN), the
+surface rules, ``lens.stop_offset_mm`` (the f-number takes ``lens.aperture_diameter_mm`` as
+the entrance pupil). Parameters that would be silently ignored and matter are refused (a
+prescription as well as a table, ``lens.glass``/``lens.surfaces.glass``,
+``lens.image_distance_mm``); the thick-lens parameters that are ignored are named in a
+warning when they differ from their defaults.
 """
 
 from __future__ import annotations
@@ -32,10 +43,10 @@ from dataclasses import dataclass
 import math
 from typing import Any, Mapping, Sequence
 
+from mechdeconv_ros.lens_source import (
+    FirstOrder, FloatArray, Illumination, LensSource, ModelError, NotApplicable)
+from mechdeconv_ros.params import SPECS
 import numpy as np
-import numpy.typing as npt
-
-FloatArray = npt.NDArray[np.float64]
 
 FIELD = 'lens.datasheet.field_angle_deg'
 HEIGHT = 'lens.datasheet.image_height_mm'
@@ -326,3 +337,95 @@ def table_params(field_deg: Sequence[float], height_mm: Sequence[float], focal_m
     }
     make_table(out)
     return out
+
+
+#: Thick-lens parameters a datasheet lens ignores (a warning names those not at their default).
+IGNORED = ('lens.r1_mm', 'lens.r2_mm', 'lens.thickness_mm', 'lens.refractive_index',
+           'lens.wavelength_nm')
+#: What needs surfaces and does not apply to a table: always noted in the model's warnings.
+NOT_APPLICABLE = ('datasheet lens: lens.tolerance.* and lens.stop_offset_mm do not apply (no '
+                  'surfaces: the tolerance sigmas are n/a; the f-number takes '
+                  'lens.aperture_diameter_mm as the entrance pupil)')
+#: Heights of the relative illumination curve of a table (from the axis to the sensor edge).
+RI_SAMPLES = 257
+
+
+class TableSource(LensSource):
+    """A lens given by its datasheet: focal length and real image height by field angle."""
+
+    mode = 'datasheet'
+    lens_parameter = HEIGHT
+    stop_parameter = FIELD
+
+    def __init__(self, values: Mapping[str, Any]) -> None:
+        """
+        Check the table and the parameters that cannot apply to it.
+
+        :param values: checked parameter values with a non-empty ``lens.datasheet.*`` table.
+        :raises ModelError: naming the parameter at fault.
+        """
+        self.values = values
+        try:
+            self.table = make_table(values)
+        except TableError as err:
+            raise ModelError(err.parameter, err.reason) from None
+        if len(values.get('lens.surfaces.radius_mm', ())) > 0:
+            raise ModelError('lens.surfaces.radius_mm',
+                             'a prescription and a datasheet table (lens.datasheet.*) both '
+                             'describe the lens: empty one of them')
+        refused = {
+            'lens.image_distance_mm': float(values.get('lens.image_distance_mm', 0.0)) != 0.0,
+            'lens.glass': bool(str(values.get('lens.glass', '')).strip()),
+            'lens.surfaces.glass': len(values.get('lens.surfaces.glass', ())) > 0,
+        }
+        for name, set_ in refused.items():
+            if set_:
+                raise ModelError(name, 'does not apply to a datasheet lens (its table fixes '
+                                       'the image heights, with the sensor in focus): set it '
+                                       'back to its default')
+        ignored = [name for name in IGNORED if values.get(name, SPECS[name].default)
+                   != SPECS[name].default]
+        self.notes = [NOT_APPLICABLE, *self.table.warnings]
+        if ignored:
+            self.notes.append(f'{", ".join(ignored)}: not used by a datasheet lens (the table '
+                              'is the lens)')
+
+    def first_order(self) -> FirstOrder:
+        """Return the datasheet's focal length; the principal planes at z = 0."""
+        return FirstOrder(self.table.focal_length_mm, 0.0, 0.0)
+
+    def real_heights(self, field_angle_rad: FloatArray, distance_mm: float,
+                     guide: Any = None) -> tuple[FloatArray, None]:
+        """Interpolate the table (scaled by v / f for a finite scene); NaN beyond it."""
+        _, v = self.image_plane(distance_mm)
+        return self.table.height(field_angle_rad) * (v / self.table.focal_length_mm), None
+
+    def check_physical(self, distance_mm: float, sensor_z_mm: float) -> list[str]:
+        """Return the table's notes (interpolation, focal length, ignored parameters)."""
+        return list(self.notes)
+
+    def relative_illumination(self, model: Any, *, with_fraction: bool = True,
+                              known: Illumination | None = None) -> Illumination:
+        """
+        Return the datasheet's relative illumination over the sensor radius.
+
+        :param model: the model of this lens.
+        :param with_fraction: ignored (a datasheet gives no stop-only beam).
+        :param known: ignored.
+        :return: RI at real heights from the axis to the raw image's edge (0 beyond the
+            table).
+        :raises NotApplicable: when the datasheet gives none.
+        """
+        if self.table.illumination is None:
+            raise NotApplicable('the datasheet gives no relative illumination '
+                                f'({ILLUMINATION} is empty)')
+        px, py = model.pixel_mm
+        corner = math.hypot((model.width - 1) / 2.0 * px, (model.height - 1) / 2.0 * py)
+        edge = math.hypot(model.width / 2.0 * px, model.height / 2.0 * py)
+        heights = np.linspace(0.0, 1.02 * edge, RI_SAMPLES)
+        field = model.field_curve or model.curve
+        theta = field.angle_from_real(heights)
+        ri = np.where(np.isfinite(theta),
+                      self.table.relative_illumination(np.nan_to_num(theta)), 0.0)
+        corner_ri = float(np.interp(corner, heights, ri))
+        return Illumination(heights, ri, None, corner, corner_ri)
