@@ -46,7 +46,7 @@ from mechdeconv_ros.lens_params import (
     make_prescription, tolerance_keys, with_glass_indices, with_overrides)
 from mechdeconv_ros.model_base import (
     FloatArray, is_prescription_mode, lens_param, ModelError, stop_param)
-from mechdeconv_ros.prescription import Paraxial, paraxial, Prescription, Surface
+from mechdeconv_ros.prescription import Paraxial, paraxial, Prescription, Surface, vertex_z
 from mechdeconv_ros.raytrace import trace_field
 from mechdeconv_ros.sensor_plane import blur_diameter_mm, sensor_plane, SensorPlane
 
@@ -55,9 +55,9 @@ DEFOCUS_WARNING_PX = 2.0
 
 #: Everything a new source may need, importable from here.
 __all__ = [
-    'FirstOrder', 'FloatArray', 'Illumination', 'LensSource', 'ModelError', 'NotApplicable',
-    'Prescription', 'PrescriptionSource', 'source_from_values', 'Surface', 'ThickLensSource',
-    'TracedSource']
+    'FirstOrder', 'FloatArray', 'Illumination', 'LensSource', 'make_prescription', 'ModelError',
+    'NotApplicable', 'Prescription', 'PrescriptionSource', 'source_from_values', 'Surface',
+    'ThickLensSource', 'TracedSource', 'vertex_z', 'with_overrides']
 
 
 class NotApplicable(ValueError):
@@ -323,7 +323,12 @@ class TracedSource(LensSource):
         return tolerance_keys(self.values)
 
     def perturbed(self, scalars: Mapping[str, float]) -> TracedSource:
-        """Return the lens of the values with ``scalars`` overriding them."""
+        """
+        Return the lens of the values with ``scalars`` overriding them.
+
+        A subclass whose constructor takes more than the values (a joint position, a
+        wavelength) overrides this.
+        """
         return type(self)(with_overrides(self.values, scalars))
 
     def relative_illumination(self, model: Any, *, with_fraction: bool = True,
