@@ -1,0 +1,319 @@
+# Copyright 2026 The mechdeconv_ros Authors.
+# SPDX-License-Identifier: Apache-2.0
+"""
+Turn a lens file into this package's parameters, and write them as a ROS 2 params file.
+
+``mechdeconv import`` runs this (no ROS). Two sources:
+
+- a Zemax ``.zmx`` file (:mod:`mechdeconv_ros.zmx` reads it) becomes a prescription
+  (``lens.surfaces.*``, docs/design.md section 2.2) at one wavelength;
+- a datasheet table (:mod:`mechdeconv_ros.datasheet_csv`) becomes datasheet mode
+  (``lens.datasheet.*`` and ``lens.focal_length_mm``).
+
+From a ``.zmx`` file, as designed:
+
+- the surfaces between the object surface and the image surface, in order, each with
+  radius = 1/CURV (0 flat), thickness DISZ, clear semi-diameter (DIAM, or a smaller CLAP),
+  conic and even asphere terms a4..a16 (PARM 2..8); a dummy surface (flat, the same medium
+  on both sides) is kept: it changes no ray and keeps the file's surface numbers (ours are
+  the file's minus 1);
+- ``lens.stop_surface`` the STOP surface, ``lens.aperture_diameter_mm`` twice its clear
+  semi-diameter (else the paraxial image of ENPD on it);
+- every medium's index at the wavelength (the file's primary one unless given): a catalog
+  glass by :func:`mechdeconv_ros.glass.refractive_index`, searched in the file's GCAT
+  catalogs first; a model glass (GLAS mode 1) or a glass no catalog holds, by its nd / vd
+  (``MODEL:nd:vd``, with a warning); none of these: refused;
+- ``scene.distance_mm``: the object surface's DISZ d (from the first vertex) measured from
+  the front principal plane H instead, l = d + z_H (z_H from the first vertex, section 2.2),
+  0 for an object at infinity (DISZ INFINITY or >= 1e9 mm);
+- ``lens.image_distance_mm``: the image surface's distance from the last lens surface (the
+  design's focus, not always the paraxial image).
+
+Refusals raise :class:`LensImportError` naming the file, line or surface and why; the
+params file is written to a temporary file in the target folder and renamed, so a refusal
+never leaves a partial file.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import math
+import os
+from pathlib import Path
+import tempfile
+from typing import Any, Callable
+
+from mechdeconv_ros.params import ASPHERE_POWERS, check_values, SPECS, to_params_yaml
+from mechdeconv_ros.raytrace import paraxial, Prescription, Surface, vertex_z
+from mechdeconv_ros.zmx import LensImportError, read, ZmxLens, ZmxSurface
+
+#: The GLAS line's nd / vd when a catalog glass carries no data of its own (Zemax writes
+#: 1.5 / 40 as a placeholder): not a usable model glass.
+PLACEHOLDER_ND_VD = (1.5, 40.0)
+
+
+@dataclass
+class Imported:
+    """Parameter values from a lens file, with the comments and warnings that go with them."""
+
+    values: dict[str, Any]
+    comments: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class Medium:
+    """A resolved medium: the ``lens.surfaces.glass`` entry, its index and any warning."""
+
+    glass: str
+    index: float
+    warning: str = ''
+
+
+Resolver = Callable[[ZmxLens, ZmxSurface, float], Medium]
+
+
+def _given_nd_vd(surface: ZmxSurface) -> bool:
+    if surface.glass_mode == 1:
+        return surface.nd > 1.0 and surface.vd > 0.0
+    return (surface.nd > 1.0 and surface.vd > 0.0 and
+            (surface.nd, surface.vd) != PLACEHOLDER_ND_VD)
+
+
+def resolve_medium(lens: ZmxLens, surface: ZmxSurface, wavelength_nm: float) -> Medium:
+    """
+    Return the medium after ``surface`` at ``wavelength_nm``.
+
+    :param lens: the file (its GCAT catalogs give the search order).
+    :param surface: the surface whose GLAS line names the medium ('' = air).
+    :param wavelength_nm: the wavelength.
+    :return: the medium.
+    :raises LensImportError: for a glass no catalog holds and the file gives no nd / vd.
+    """
+    from mechdeconv_ros import glass as catalog
+
+    name = surface.glass
+    where = f'{lens.path}: line {surface.glass_line}: surface {surface.number}'
+    if not name or name.upper() == 'AIR':
+        return Medium('', 1.0)
+    model = f'MODEL:{surface.nd:.6g}:{surface.vd:.6g}'
+    if surface.glass_mode == 1 or name.upper().startswith('___BLANK'):
+        if not _given_nd_vd(surface):
+            raise LensImportError(f'{where}: a model glass without nd and vd')
+        return Medium(model, catalog.model_glass_index(surface.nd, surface.vd, wavelength_nm),
+                      f'surface {surface.number}: model glass nd {surface.nd:.6g}, vd '
+                      f'{surface.vd:.4g}: index extended off the d-line by the model glass '
+                      'dispersion (docs/design.md)')
+    for candidate in [f'{c}:{name}' for c in lens.catalogs] + [name]:
+        try:
+            found = catalog.lookup(candidate)
+        except (catalog.GlassError, ValueError):
+            continue
+        qualified = f'{found.catalog}:{found.name}'
+        index = catalog.refractive_index(qualified, wavelength_nm)
+        warning = ''
+        if getattr(found, 'obsolete', False):
+            warning = (f'surface {surface.number}: glass {name} is obsolete (withdrawn from '
+                       f'the current catalog); index from the {found.catalog} catalog\'s '
+                       'obsolete-glass data')
+        return Medium(qualified, index, warning)
+    if _given_nd_vd(surface):
+        return Medium(model, catalog.model_glass_index(surface.nd, surface.vd, wavelength_nm),
+                      f'surface {surface.number}: glass {name} is in none of the catalogs; '
+                      f'used the nd {surface.nd:.6g} and vd {surface.vd:.4g} of its GLAS line '
+                      f'as a model glass ({model})')
+    raise LensImportError(f'{where}: glass {name} is in none of the catalogs (searched '
+                          f'{", ".join(lens.catalogs + ["all"])}) and its GLAS line gives no '
+                          'nd / vd: replace it by a catalog glass or a model glass in the file')
+
+
+def _semi_diameter(surface: ZmxSurface) -> float:
+    if surface.aperture > 0.0 and (surface.semi_diameter == 0.0 or
+                                   surface.aperture < surface.semi_diameter):
+        return surface.aperture
+    return surface.semi_diameter
+
+
+def _pickup_glass(lens: ZmxLens, surface: ZmxSurface) -> ZmxSurface:
+    """Return the surface whose glass ``surface`` picks up (GLAS mode 2), or itself."""
+    seen = set()
+    while surface.glass_mode == 2 and 0 <= surface.pickup < len(lens.surfaces):
+        if surface.number in seen:
+            raise LensImportError(f'{lens.path}: line {surface.glass_line}: surface '
+                                  f'{surface.number}: glass pick-ups form a loop')
+        seen.add(surface.number)
+        source = lens.surfaces[surface.pickup]
+        if not source.glass:
+            break
+        surface = source
+    return surface
+
+
+def zmx_values(lens: ZmxLens, wavelength_nm: float | None = None,
+               resolve: Resolver = resolve_medium) -> Imported:
+    """
+    Convert a read ``.zmx`` lens to parameter values (see the module docstring).
+
+    :param lens: from :func:`mechdeconv_ros.zmx.read`.
+    :param wavelength_nm: the wavelength (default: the file's primary wavelength).
+    :param resolve: the glass resolver (tests inject their own).
+    :return: the values (only the parameters the file sets), comments and warnings.
+    :raises LensImportError: as :func:`resolve_medium`, or when the lens is not one this
+        package can trace (e.g. afocal).
+    """
+    wavelength = float(wavelength_nm) if wavelength_nm else lens.primary_wavelength_um * 1e3
+    if not 200.0 <= wavelength <= 20000.0:
+        raise LensImportError(f'{lens.path}: wavelength {wavelength:g} nm is outside 200 nm to '
+                              '20 um')
+    out = Imported(values={})
+    out.warnings += lens.notes
+    surfaces = lens.surfaces[1:-1]
+    media = []
+    for surface in surfaces:
+        medium = resolve(lens, _pickup_glass(lens, surface), wavelength)
+        media.append(medium)
+        if medium.warning and medium.warning not in out.warnings:
+            out.warnings.append(medium.warning)
+    if media[-1].index != 1.0:
+        raise LensImportError(f'{lens.path}: the image space (after surface '
+                              f'{surfaces[-1].number}) is not air')
+    stop = lens.stop_number - 1
+    built = [Surface(radius_mm=0.0 if s.curvature == 0.0 else 1.0 / s.curvature,
+                     thickness_mm=float(s.thickness or 0.0) if i < len(surfaces) - 1 else 0.0,
+                     refractive_index=m.index,
+                     semi_diameter_mm=_semi_diameter(s),
+                     conic=s.conic,
+                     asphere=tuple(s.asphere[1:]))
+             for i, (s, m) in enumerate(zip(surfaces, media))]
+    try:
+        probe = Prescription(tuple(built), 0.0)
+        para = paraxial(probe)
+    except ValueError as err:
+        raise LensImportError(f'{lens.path}: {err}') from None
+    values = out.values
+    values['lens.surfaces.radius_mm'] = [s.radius_mm for s in built]
+    values['lens.surfaces.thickness_mm'] = [float(s.thickness or 0.0) for s in surfaces]
+    values['lens.surfaces.refractive_index'] = [m.index for m in media]
+    values['lens.surfaces.semi_diameter_mm'] = [s.semi_diameter_mm for s in built]
+    if any(s.conic for s in built):
+        values['lens.surfaces.conic'] = [s.conic for s in built]
+    for j, power in enumerate(ASPHERE_POWERS):
+        terms = [s.asphere[j] for s in built]
+        if any(terms):
+            values[f'lens.surfaces.asphere_a{power}'] = terms
+    values['lens.stop_surface'] = stop
+    values['lens.aperture_diameter_mm'] = _aperture(lens, built, stop, out)
+    distance = lens.object_distance_mm
+    values['scene.distance_mm'] = (0.0 if math.isinf(distance)
+                                   else distance + para.front_principal_z_mm)
+    optional = {'lens.wavelength_nm': wavelength,
+                'lens.surfaces.glass': [m.glass for m in media],
+                'lens.image_distance_mm': float(surfaces[-1].thickness or 0.0)}
+    for name, value in optional.items():
+        if name in SPECS:
+            values[name] = value
+        else:
+            out.comments.append(f'{name}: {value} (not a parameter of this build)')
+    out.comments[:0] = _comments(lens, wavelength, para.efl_mm, distance)
+    _check(lens, out)
+    return out
+
+
+def _aperture(lens: ZmxLens, built: list[Surface], stop: int, out: Imported) -> float:
+    """Return the stop's physical diameter: 2 x its semi-diameter, else ENPD imaged on it."""
+    semi = built[stop].semi_diameter_mm
+    if semi > 0.0:
+        return 2.0 * semi
+    if lens.entrance_pupil_mm > 0.0 and math.isinf(lens.object_distance_mm):
+        # Paraxial marginal ray from infinity at the pupil's edge: (y, n u) = (D/2, 0).
+        y, nu, index = lens.entrance_pupil_mm / 2.0, 0.0, 1.0
+        for surface in built[:stop]:
+            nu -= (surface.refractive_index - index) * surface.curvature_per_mm * y
+            index = surface.refractive_index
+            y += surface.thickness_mm * nu / index
+        if abs(y) > 0.0:
+            return 2.0 * abs(y)
+    out.warnings.append('the stop has no semi-diameter and the file no usable entrance pupil: '
+                        'lens.aperture_diameter_mm left at its default; set it')
+    return float(SPECS['lens.aperture_diameter_mm'].default)
+
+
+def _comments(lens: ZmxLens, wavelength: float, efl: float, distance: float) -> list[str]:
+    where = 'infinity' if math.isinf(distance) else f'{distance:.6g} mm before the first vertex'
+    return [
+        f'Imported by `mechdeconv import` from {Path(lens.path).name}'
+        + (f' ("{lens.name}")' if lens.name else ''),
+        f'as designed: {len(lens.surfaces) - 2} surfaces (file surfaces 1 to '
+        f'{len(lens.surfaces) - 2}; ours are numbered from 0), stop = file surface '
+        f'{lens.stop_number}, object at {where},',
+        f'wavelength {wavelength:.6g} nm, effective focal length {efl:.9g} mm.',
+        'The sensor is not in the file: add sensor.pixel_size_x_um, pixel_size_y_um, '
+        'width_px and height_px',
+        '(or leave width/height 0 for the node to take them from the images).',
+    ]
+
+
+def _check(lens: ZmxLens, out: Imported) -> None:
+    """Refuse values that the parameter schema or the model would refuse on loading."""
+    from mechdeconv_ros.model import make_prescription, ModelError
+
+    try:
+        values = check_values(out.values)
+        make_prescription(values)
+    except ModelError as err:
+        raise LensImportError(f'{lens.path}: the imported lens is refused by the model: '
+                              f'{err}') from None
+    except ValueError as err:
+        raise LensImportError(f'{lens.path}: the imported lens does not fit the parameter '
+                              f'ranges: {err}') from None
+
+
+def import_zmx(path: str | Path, wavelength_nm: float | None = None,
+               resolve: Resolver = resolve_medium) -> Imported:
+    """
+    Read a ``.zmx`` file and convert it (:func:`mechdeconv_ros.zmx.read`, :func:`zmx_values`).
+
+    :param path: the file.
+    :param wavelength_nm: the wavelength (default: the file's primary one).
+    :param resolve: the glass resolver.
+    :return: the imported values.
+    :raises LensImportError: naming the file, line or surface, for anything not imported.
+    """
+    return zmx_values(read(path), wavelength_nm, resolve)
+
+
+def params_text(imported: Imported) -> str:
+    """
+    Return the params file: the comments, then ``/**: ros__parameters:`` with the values.
+
+    :param imported: from :func:`import_zmx` or the datasheet reader.
+    :return: YAML text that :func:`mechdeconv_ros.params.load_params_file` and rclpy load.
+    """
+    lines = [f'# {line}'.rstrip() for line in imported.comments]
+    lines += [f'# warning: {w}' for w in imported.warnings]
+    order = [spec.name for spec in SPECS.values() if spec.name in imported.values]
+    order += [name for name in imported.values if name not in order]
+    return '\n'.join(lines) + '\n' + to_params_yaml(imported.values, names=order)
+
+
+def write_atomically(path: str | Path, text: str) -> None:
+    """
+    Write ``text`` to ``path`` through a temporary file in the same folder and a rename.
+
+    :param path: the target.
+    :param text: the content.
+    :raises LensImportError: when the folder cannot be written.
+    """
+    target = Path(path)
+    try:
+        handle, temp = tempfile.mkstemp(prefix=f'.{target.name}.', suffix='.tmp',
+                                        dir=str(target.parent.resolve()))
+    except OSError as err:
+        raise LensImportError(f'{path}: cannot write there: {err.strerror}') from None
+    try:
+        with os.fdopen(handle, 'w', encoding='utf-8') as stream:
+            stream.write(text)
+        os.replace(temp, target)
+    except OSError as err:
+        Path(temp).unlink(missing_ok=True)
+        raise LensImportError(f'{path}: cannot write there: {err.strerror}') from None
