@@ -134,7 +134,7 @@ def table_values(path: str | Path, focal_length_mm: float) -> Imported:
     warnings = []
     slope = heights[1] / math.radians(angles[1]) if angles[0] == 0.0 else 0.0
     if angles[0] == 0.0 and slope > 0 and abs(slope / focal_length_mm - 1.0) > 0.05:
-        warnings.append(f'the table\'s first step gives f ~ {slope:.4g} mm, '
+        warnings.append("the table's first step gives" f' f ~ {slope:.4g} mm, '
                         f'{100.0 * (slope / focal_length_mm - 1.0):+.1f} % from '
                         f'--focal-length-mm {focal_length_mm:g}')
     return Imported(values=values, comments=comments, warnings=warnings)

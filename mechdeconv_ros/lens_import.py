@@ -44,7 +44,7 @@ import tempfile
 from typing import Any, Callable
 
 from mechdeconv_ros.params import ASPHERE_POWERS, check_values, SPECS, to_params_yaml
-from mechdeconv_ros.raytrace import paraxial, Prescription, Surface, vertex_z
+from mechdeconv_ros.raytrace import paraxial, Prescription, Surface
 from mechdeconv_ros.zmx import LensImportError, read, ZmxLens, ZmxSurface
 
 #: The GLAS line's nd / vd when a catalog glass carries no data of its own (Zemax writes
@@ -114,7 +114,7 @@ def resolve_medium(lens: ZmxLens, surface: ZmxSurface, wavelength_nm: float) -> 
         warning = ''
         if getattr(found, 'obsolete', False):
             warning = (f'surface {surface.number}: glass {name} is obsolete (withdrawn from '
-                       f'the current catalog); index from the {found.catalog} catalog\'s '
+                       f'the current catalog); index from the {found.catalog} catalog' "'s "
                        'obsolete-glass data')
         return Medium(qualified, index, warning)
     if _given_nd_vd(surface):

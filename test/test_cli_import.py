@@ -41,8 +41,8 @@ def run(capsys, *argv):
     return status, out, err
 
 
-@pytest.mark.parametrize('sep', [',', ';', '\t', ' '], ids=['comma', 'semicolon', 'tab',
-                                                          'space'])
+@pytest.mark.parametrize('sep', [',', ';', '\t', ' '],
+                         ids=['comma', 'semicolon', 'tab', 'space'])
 def test_csv_separators_and_header(tmp_path, sep):
     path = tmp_path / 't.csv'
     path.write_text(TABLE.replace(', ', sep).replace(',', sep))

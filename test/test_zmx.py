@@ -144,8 +144,8 @@ def test_pickup_glass_and_a_dummy_surface():
         seen.append(surface.glass)
         return fixed_index(lens, surface, wavelength_nm)
 
-    doublet = SINGLET.replace('  DISZ 47.5', '  DISZ 2\n  GLAS ZZZ 2 1 1.6 40 0 0 0 0 0 0\n'
-                                            'SURF 3\n  CURV -0.01\n  DISZ 40').replace(
+    cemented = '  DISZ 2\n  GLAS ZZZ 2 1 1.6 40 0 0 0 0 0 0\nSURF 3\n  CURV -0.01\n  DISZ 40'
+    doublet = SINGLET.replace('  DISZ 47.5', cemented).replace(
         'SURF 3\n  TYPE STANDARD\n  CURV 0.0\n  DISZ 0', 'SURF 4\n  CURV 0.0\n  DISZ 0')
     values = zmx_values(parse(doublet, 'd.zmx'), resolve=resolve).values
     assert values['lens.surfaces.refractive_index'] == [1.5, 1.5, 1.0]
@@ -182,8 +182,8 @@ REFUSALS = [
      ['surface 2', 'SUPERCONIC']),
     ('black-box', lambda t: t.replace('  TYPE EVENASPH', '  TYPE BLACKBOX'),
      ['surface 2', 'black box']),
-    ('mirror', lambda t: t.replace('GLAS N-BK7', 'GLAS MIRROR'), ['line 25', 'surface 1',
-                                                               'mirror']),
+    ('mirror', lambda t: t.replace('GLAS N-BK7', 'GLAS MIRROR'),
+     ['line 25', 'surface 1', 'mirror']),
     ('tilt', lambda t: t.replace('  DISZ 5\n', '  DISZ 5\n  SCBD 1 0 0 0 0 5 0 0\n'),
      ['surface 1', 'tilted or decentered']),
     ('decenter', lambda t: t.replace('  DISZ 5\n', '  DISZ 5\n  SCAD 1 0 0.5 0 0 0 0 0\n'),

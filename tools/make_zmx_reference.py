@@ -55,7 +55,7 @@ FILES = (
      'Thorlabs 354710-C molded asphere (D-ZK3M model glass, 1550 nm), UTF-16: 4 deg chosen, '
      'inside the semi-diameters the file computed for the axis'),
     ('US00583336-2-scaled', 'US00583336-2-scaled.zmx', 24.0, 5.0,
-     'US 583,336 example 2 double Gauss (patent), 24 deg: the file\'s largest field'),
+     "US 583,336 example 2 double Gauss (patent), 24 deg: the file's largest field"),
     ('US08427765-1', 'US08427765-1.zmx', 24.0, 5.0,
      'US 8,427,765 example 1 (patent, EVENASPH), fields by real image height up to '
      '13.6 mm: 24 deg chosen, inside that image height'),
