@@ -22,7 +22,9 @@ From a ``.zmx`` file, as designed:
 - every medium's index at the wavelength (the file's primary one unless given): a catalog
   glass by :func:`mechdeconv_ros.glass.refractive_index`, searched in the file's GCAT
   catalogs first; a model glass (GLAS mode 1) or a glass no catalog holds, by its nd / vd
-  (``MODEL:nd:vd``, with a warning); none of these: refused;
+  (``MODEL:nd:vd``, with a warning); a withdrawn glass the file gives no nd / vd for, by its
+  catalog successor of the same name (``BK7`` -> ``SCHOTT:N-BK7``, ``X_MOLD`` -> ``X``, with
+  a warning); none of these: refused;
 - ``scene.distance_mm``: the object surface's DISZ d (from the first vertex) measured from
   the front principal plane H instead, l = d + z_H (z_H from the first vertex, section 2.2),
   0 for an object at infinity (DISZ INFINITY or >= 1e9 mm);
@@ -82,6 +84,26 @@ def _given_nd_vd(surface: ZmxSurface) -> bool:
 
 def resolve_medium(lens: ZmxLens, surface: ZmxSurface, wavelength_nm: float) -> Medium:
     """
+    Return the medium after ``surface`` at ``wavelength_nm`` (see :func:`_resolve`).
+
+    :param lens: the file (its GCAT catalogs give the search order).
+    :param surface: the surface whose GLAS line names the medium ('' = air).
+    :param wavelength_nm: the wavelength.
+    :return: the medium.
+    :raises LensImportError: for a glass no catalog holds and the file gives no nd / vd, or
+        a wavelength outside the range of the glass's dispersion formula.
+    """
+    from mechdeconv_ros.glass import GlassError
+
+    try:
+        return _resolve(lens, surface, wavelength_nm)
+    except GlassError as err:
+        raise LensImportError(f'{lens.path}: line {surface.glass_line}: surface '
+                              f'{surface.number}: {err}') from None
+
+
+def _resolve(lens: ZmxLens, surface: ZmxSurface, wavelength_nm: float) -> Medium:
+    """
     Return the medium after ``surface`` at ``wavelength_nm``.
 
     :param lens: the file (its GCAT catalogs give the search order).
@@ -104,15 +126,12 @@ def resolve_medium(lens: ZmxLens, surface: ZmxSurface, wavelength_nm: float) -> 
                       f'surface {surface.number}: model glass nd {surface.nd:.6g}, vd '
                       f'{surface.vd:.4g}: index extended off the d-line by the model glass '
                       'dispersion (docs/design.md)')
-    for candidate in [f'{c}:{name}' for c in lens.catalogs] + [name]:
-        try:
-            found = catalog.lookup(candidate)
-        except (catalog.GlassError, ValueError):
-            continue
+    found = _catalog_glass(catalog, lens.catalogs, name)
+    if found is not None:
         qualified = f'{found.catalog}:{found.name}'
         index = catalog.refractive_index(qualified, wavelength_nm)
         warning = ''
-        if getattr(found, 'obsolete', False):
+        if found.obsolete:
             warning = (f'surface {surface.number}: glass {name} is obsolete (withdrawn from '
                        f'the current catalog); index from the {found.catalog} catalog' "'s "
                        'obsolete-glass data')
@@ -122,9 +141,51 @@ def resolve_medium(lens: ZmxLens, surface: ZmxSurface, wavelength_nm: float) -> 
                       f'surface {surface.number}: glass {name} is in none of the catalogs; '
                       f'used the nd {surface.nd:.6g} and vd {surface.vd:.4g} of its GLAS line '
                       f'as a model glass ({model})')
+    successor = _successor(catalog, lens.catalogs, name)
+    if successor is not None:
+        qualified = f'{successor.catalog}:{successor.name}'
+        why = ('a molded variant: the index after moulding differs by about 1e-3'
+               if name.upper().endswith('_MOLD') else
+               'withdrawn (obsolete): successors differ in the 4th to 5th decimal of the index')
+        return Medium(qualified, catalog.refractive_index(qualified, wavelength_nm),
+                      f'surface {surface.number}: glass {name} is in none of the catalogs '
+                      f'and its GLAS line gives no nd / vd; used {qualified} (nd '
+                      f'{successor.nd:.6g}, vd {successor.vd:.4g}), the catalog glass it '
+                      f'stands for: {name} is {why}')
     raise LensImportError(f'{where}: glass {name} is in none of the catalogs (searched '
                           f'{", ".join(lens.catalogs + ["all"])}) and its GLAS line gives no '
                           'nd / vd: replace it by a catalog glass or a model glass in the file')
+
+
+def _catalog_glass(catalog: Any, catalogs: list[str], name: str) -> Any:
+    """Return the glass ``name`` from the file's catalogs first, then any; None if none."""
+    for candidate in [f'{c}:{name}' for c in catalogs] + [name]:
+        try:
+            return catalog.lookup(candidate)
+        except ValueError:                       # GlassError: unknown, ambiguous
+            continue
+    return None
+
+
+def _successor(catalog: Any, catalogs: list[str], name: str) -> Any:
+    """
+    Return the successor of a withdrawn glass, or None.
+
+    Zemax names a molded variant ``NAME_MOLD`` (the index after moulding differs by about
+    1e-3 from the catalog's): the catalog glass ``NAME``. Schott replaced its lead and arsenic
+    glasses by ``N-`` (and ``P-``) glasses of the same nd / vd to about 1e-4: BK7 is N-BK7.
+    """
+    upper = name.upper()
+    candidates = []
+    if upper.endswith('_MOLD'):
+        candidates.append(name[:-len('_MOLD')])
+    if not upper.startswith(('N-', 'P-')):
+        candidates += [f'N-{name}', f'P-{name}']
+    for candidate in candidates:
+        found = _catalog_glass(catalog, catalogs, candidate)
+        if found is not None:
+            return found
+    return None
 
 
 def _semi_diameter(surface: ZmxSurface) -> float:

@@ -115,7 +115,8 @@ def test_zmx_import_writes_a_params_file_that_info_loads(tmp_path, capsys):
     out = tmp_path / 'lens.yaml'
     status, _, err = run(capsys, 'import', ZMX / 'edmund_55278.zmx', '-o', out)
     assert status == 0, err
-    assert 'obsolete' in err and 'wrote' in err and 'Traceback' not in err
+    assert 'BK7' in err and 'SCHOTT:N-BK7' in err and 'obsolete' in err
+    assert 'wrote' in err and 'Traceback' not in err
     text = out.read_text()
     assert 'edmund_55278.zmx ("55278 Mounted Achromat Pair")' in text
     assert 'add sensor.pixel_size_x_um' in text
@@ -128,7 +129,8 @@ def test_zmx_import_writes_a_params_file_that_info_loads(tmp_path, capsys):
                               1200, '-p', 'sensor.pixel_size_x_um=5.86', '-p',
                               'sensor.pixel_size_y_um=5.86', '--json')
     assert status == 0, err
-    assert_allclose(json.loads(report)['focal_length_mm'], 52.24355673278863, rtol=1e-6)
+    # optiland's BK7 and SF5 data differ from the catalogs' in the 5th decimal of the index.
+    assert_allclose(json.loads(report)['focal_length_mm'], 52.24355673278863, rtol=3e-5)
 
 
 @needs_glass

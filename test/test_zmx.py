@@ -254,8 +254,17 @@ def test_unknown_glass_without_nd_vd_is_refused_by_name():
     assert 'line 25' in str(err.value) and 'UNOBTAINIUM-7' in str(err.value)
     text = text.replace('1.5 40 0', '1.6 45 0')
     result = zmx_values(parse(text, 'g.zmx'))
-    assert any('UNOBTAINIUM-7' in w and 'model glass' in w for w in result.warnings)
-    assert result.values['lens.surfaces.glass'][0] == 'MODEL:1.6:45'
+    assert any('UNOBTAINIUM-7' in w and 'MODEL:1.6:45' in w for w in result.warnings)
+    from mechdeconv_ros.glass import model_glass_index
+    assert result.values['lens.surfaces.refractive_index'][0] == \
+        model_glass_index(1.6, 45.0, 587.56)
+    plain = zmx_values(parse(SINGLET, 'g.zmx'))
+    assert plain.warnings == []
+    assert plain.values['lens.surfaces.refractive_index'][0] == pytest.approx(1.5168, abs=2e-5)
+    withdrawn = zmx_values(parse(SINGLET.replace('GLAS N-BK7 0 0 1.5168 64.17', 'GLAS BK7'),
+                                 'g.zmx'))
+    assert 'glass BK7' in withdrawn.warnings[0] and 'SCHOTT:N-BK7' in withdrawn.warnings[0]
+    assert withdrawn.values == plain.values
 
 
 REAL = (FILES / 'US00583336-2-scaled.zmx').read_bytes()

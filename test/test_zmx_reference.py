@@ -25,6 +25,7 @@ import math
 from pathlib import Path
 
 from mechdeconv_ros.lens_import import import_zmx, Medium
+from mechdeconv_ros.zmx import LensImportError
 from mechdeconv_ros.raytrace import paraxial, Prescription, Surface, trace_field_angles
 from mechdeconv_ros.raytrace import vertex_z
 import numpy as np
@@ -35,6 +36,14 @@ ROOT = Path(__file__).resolve().parents[1]
 DATA = json.loads((ROOT / 'test' / 'data' / 'zmx_reference.json').read_text())
 LENSES = DATA['lenses']
 HAVE_GLASS = importlib.util.find_spec('mechdeconv_ros.glass') is not None
+#: Files our glass data cannot import as they stand (the geometry test above still runs).
+REFUSED = {
+    # Schott B 270 is in no bundled catalog and the file's GLAS line carries 1.5 / 40
+    # placeholders, not its nd / vd.
+    'thorlabs_ACL3026U': 'glass B270 is in none of the catalogs',
+    # D-ZK3M (LightPath) is a model glass here, and 1550 nm is beyond the model's range.
+    'thorlabs_354710-C': 'outside the valid range',
+}
 
 
 def optiland_indices(ref: dict):
@@ -114,6 +123,11 @@ def test_an_asphere_and_a_utf16_file_are_among_them():
 def test_glass_indices_match_optiland(key):
     """Catalog glasses: our index agrees with optiland's; the whole import traces alike."""
     ref = LENSES[key]
+    if key in REFUSED:
+        with pytest.raises(LensImportError) as err:
+            import_zmx(ROOT / ref['file'])
+        assert REFUSED[key] in str(err.value)
+        return
     imported = import_zmx(ROOT / ref['file'])
     ours = imported.values['lens.surfaces.refractive_index']
     theirs = [m['index'] for m in ref['media'][1:-1]]
