@@ -43,6 +43,7 @@ import math
 import os
 from pathlib import Path
 import tempfile
+import textwrap
 from typing import Any, Callable
 
 from mechdeconv_ros.params import ASPHERE_POWERS, check_values, SPECS, to_params_yaml
@@ -301,16 +302,15 @@ def _aperture(lens: ZmxLens, built: list[Surface], stop: int, out: Imported) -> 
 
 def _comments(lens: ZmxLens, wavelength: float, efl: float, distance: float) -> list[str]:
     where = 'infinity' if math.isinf(distance) else f'{distance:.6g} mm before the first vertex'
+    title = f' ("{lens.name}")' if lens.name else ''
     return [
-        f'Imported by `mechdeconv import` from {Path(lens.path).name}'
-        + (f' ("{lens.name}")' if lens.name else ''),
-        f'as designed: {len(lens.surfaces) - 2} surfaces (file surfaces 1 to '
-        f'{len(lens.surfaces) - 2}; ours are numbered from 0), stop = file surface '
-        f'{lens.stop_number}, object at {where},',
-        f'wavelength {wavelength:.6g} nm, effective focal length {efl:.9g} mm.',
+        f'Imported by `mechdeconv import` from {Path(lens.path).name}{title}, as designed: '
+        f'{len(lens.surfaces) - 2} surfaces (file surfaces 1 to {len(lens.surfaces) - 2}; '
+        f'ours are numbered from 0), stop = file surface {lens.stop_number}, object at '
+        f'{where}, wavelength {wavelength:.6g} nm, effective focal length {efl:.9g} mm.',
         'The sensor is not in the file: add sensor.pixel_size_x_um, pixel_size_y_um, '
-        'width_px and height_px',
-        '(or leave width/height 0 for the node to take them from the images).',
+        'width_px and height_px (or leave width/height 0 for the node to take them from the '
+        'images).',
     ]
 
 
@@ -350,8 +350,9 @@ def params_text(imported: Imported) -> str:
     :param imported: from :func:`import_zmx` or the datasheet reader.
     :return: YAML text that :func:`mechdeconv_ros.params.load_params_file` and rclpy load.
     """
-    lines = [f'# {line}'.rstrip() for line in imported.comments]
-    lines += [f'# warning: {w}' for w in imported.warnings]
+    lines = []
+    for line in imported.comments + [f'warning: {w}' for w in imported.warnings]:
+        lines += textwrap.wrap(line, 97, initial_indent='# ', subsequent_indent='#   ')
     order = [spec.name for spec in SPECS.values() if spec.name in imported.values]
     order += [name for name in imported.values if name not in order]
     return '\n'.join(lines) + '\n' + to_params_yaml(imported.values, names=order)

@@ -289,3 +289,14 @@ def test_fuzz_flips_and_truncations_refuse_cleanly(cut, flips):
     for value in result.values.values():
         assert all(map(math.isfinite, value)) if isinstance(value, list) else \
             math.isfinite(value)
+
+
+def test_real_file_with_a_finite_object():
+    """US 5,831,776: object 110.86 mm before the first vertex -> scene.distance_mm from H."""
+    from mechdeconv_ros.model import make_prescription
+    from mechdeconv_ros.params import check_values
+
+    values = import_zmx(FILES / 'US05831776-1.zmx', resolve=fixed_index).values
+    assert len(values['lens.surfaces.radius_mm']) == 42 and values['lens.stop_surface'] == 19
+    z_h = paraxial(make_prescription(check_values(values))).front_principal_z_mm
+    assert_allclose(values['scene.distance_mm'], 110.8588354359 + z_h, rtol=1e-12)
