@@ -316,7 +316,8 @@ def _comments(lens: ZmxLens, wavelength: float, efl: float, distance: float) -> 
 
 def _check(lens: ZmxLens, out: Imported) -> None:
     """Refuse values that the parameter schema or the model would refuse on loading."""
-    from mechdeconv_ros.model import make_prescription, ModelError
+    from mechdeconv_ros.lens_params import make_prescription
+    from mechdeconv_ros.model_base import ModelError
 
     try:
         values = check_values(out.values)
