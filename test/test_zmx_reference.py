@@ -25,9 +25,9 @@ import math
 from pathlib import Path
 
 from mechdeconv_ros.lens_import import import_zmx, Medium
-from mechdeconv_ros.zmx import LensImportError
 from mechdeconv_ros.raytrace import paraxial, Prescription, Surface, trace_field_angles
 from mechdeconv_ros.raytrace import vertex_z
+from mechdeconv_ros.zmx import LensImportError
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest
