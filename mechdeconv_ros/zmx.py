@@ -430,6 +430,13 @@ def _check_whole(lens: ZmxLens, seen_keyword: bool) -> None:
     if stops and not 0 < stops[0] < len(lens.surfaces) - 1:
         raise LensImportError(f'{path}: the stop is surface {stops[0]}, the object or image '
                               'surface: it must be a lens surface')
+    image = lens.surfaces[-1]
+    if image.curvature != 0.0:
+        lens.notes.append(f'the image surface (surface {image.number}) is curved (radius '
+                          f'{1.0 / image.curvature:.6g} mm): the sensor of this model is flat, at '
+                          'its vertex')
+    if lens.surfaces[0].curvature != 0.0:
+        lens.notes.append('the object surface is curved: the scene of this model is a plane')
     if lens.configurations > 1:
         lens.notes.append(f'{lens.configurations} configurations: imported the one stored in '
                           'the surface data (the configuration current when the file was saved)')

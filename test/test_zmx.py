@@ -300,3 +300,11 @@ def test_real_file_with_a_finite_object():
     assert len(values['lens.surfaces.radius_mm']) == 42 and values['lens.stop_surface'] == 19
     z_h = paraxial(make_prescription(check_values(values))).front_principal_z_mm
     assert_allclose(values['scene.distance_mm'], 110.8588354359 + z_h, rtol=1e-12)
+
+
+def test_a_curved_image_surface_is_imported_flat_with_a_warning():
+    text = SINGLET.replace('SURF 3\n  TYPE STANDARD\n  CURV 0.0', 'SURF 3\n  TYPE STANDARD\n'
+                                                               '  CURV -0.01')
+    result = imported(text)
+    assert any('image surface (surface 3) is curved (radius -100 mm)' in w
+               for w in result.warnings)
