@@ -303,8 +303,8 @@ def test_real_file_with_a_finite_object():
 
 
 def test_a_curved_image_surface_is_imported_flat_with_a_warning():
-    text = SINGLET.replace('SURF 3\n  TYPE STANDARD\n  CURV 0.0', 'SURF 3\n  TYPE STANDARD\n'
-                                                               '  CURV -0.01')
+    flat = 'SURF 3\n  TYPE STANDARD\n  CURV 0.0'
+    text = SINGLET.replace(flat, flat.replace('CURV 0.0', 'CURV -0.01'))
     result = imported(text)
     assert any('image surface (surface 3) is curved (radius -100 mm)' in w
                for w in result.warnings)
