@@ -11,8 +11,9 @@ increase strictly from row to row (the map from angle to height is one-to-one, d
 section 2.5); theta in [0, 180) deg, heights >= 0.
 
 Parameters: ``lens.datasheet.field_angle_deg``, ``lens.datasheet.image_height_mm``,
-``lens.datasheet.relative_illumination`` (with a third column) and ``lens.focal_length_mm``
-(the effective focal length, given by the user: a table of heights does not fix it).
+``lens.datasheet.relative_illumination`` (with a third column), ``lens.focal_length_mm``
+(the effective focal length, given by the user: a table of heights does not fix it) and
+``scene.distance_mm`` 0 (infinity, where datasheet tables are given).
 """
 
 from __future__ import annotations
@@ -123,7 +124,9 @@ def table_values(path: str | Path, focal_length_mm: float) -> Imported:
     angles, heights, ri = read_table(path)
     values: dict = {'lens.focal_length_mm': float(focal_length_mm),
                     'lens.datasheet.field_angle_deg': angles,
-                    'lens.datasheet.image_height_mm': heights}
+                    'lens.datasheet.image_height_mm': heights,
+                    # A datasheet's distortion table is for an object at infinity.
+                    'scene.distance_mm': 0.0}
     if ri:
         values['lens.datasheet.relative_illumination'] = ri
     comments = [f'Imported by `mechdeconv import` from {Path(path).name}: a datasheet '

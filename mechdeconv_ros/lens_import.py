@@ -271,6 +271,9 @@ def zmx_values(lens: ZmxLens, wavelength_nm: float | None = None,
     optional = {'lens.wavelength_nm': wavelength,
                 'lens.surfaces.glass': [m.glass for m in media],
                 'lens.image_distance_mm': float(surfaces[-1].thickness or 0.0)}
+    if optional['lens.image_distance_mm'] == 0.0:
+        out.warnings.append('the image surface is on the last lens vertex: '
+                            'lens.image_distance_mm 0 puts the sensor at the paraxial image')
     for name, value in optional.items():
         if name in SPECS:
             values[name] = value
