@@ -224,9 +224,13 @@ def zmx_values(lens: ZmxLens, wavelength_nm: float | None = None,
         package can trace (e.g. afocal).
     """
     wavelength = float(wavelength_nm) if wavelength_nm else lens.primary_wavelength_um * 1e3
-    if not 200.0 <= wavelength <= 20000.0:
-        raise LensImportError(f'{lens.path}: wavelength {wavelength:g} nm is outside 200 nm to '
-                              '20 um')
+    spec = SPECS.get('lens.wavelength_nm')
+    low, high = (spec.minimum, spec.maximum) if spec is not None else (200.0, 20000.0)
+    if not low <= wavelength <= high:
+        given = 'given' if wavelength_nm else "the file's primary wavelength"
+        raise LensImportError(f'{lens.path}: wavelength {wavelength:g} nm ({given}) is outside '
+                              f'{low:g} to {high:g} nm (lens.wavelength_nm); choose one with '
+                              '--wavelength-nm')
     out = Imported(values={})
     out.warnings += lens.notes
     surfaces = lens.surfaces[1:-1]
@@ -265,6 +269,14 @@ def zmx_values(lens: ZmxLens, wavelength_nm: float | None = None,
             values[f'lens.surfaces.asphere_a{power}'] = terms
     values['lens.stop_surface'] = stop
     values['lens.aperture_diameter_mm'] = _aperture(lens, built, stop, out)
+    largest = _largest_aperture(built, stop, lens.object_distance_mm)
+    if values['lens.aperture_diameter_mm'] > largest:
+        out.warnings.append(f'the stop (file surface {lens.stop_number}) is '
+                            f'{values["lens.aperture_diameter_mm"]:.6g} mm wide, but the clear '
+                            'semi-diameters of the other surfaces pass a paraxial axial beam '
+                            f'through at most {largest:.6g} mm of it: '
+                            'lens.aperture_diameter_mm set to that')
+        values['lens.aperture_diameter_mm'] = largest
     distance = lens.object_distance_mm
     values['scene.distance_mm'] = (0.0 if math.isinf(distance)
                                    else distance + para.front_principal_z_mm)
@@ -301,6 +313,37 @@ def _aperture(lens: ZmxLens, built: list[Surface], stop: int, out: Imported) -> 
     out.warnings.append('the stop has no semi-diameter and the file no usable entrance pupil: '
                         'lens.aperture_diameter_mm left at its default; set it')
     return float(SPECS['lens.aperture_diameter_mm'].default)
+
+
+def _largest_aperture(built: list[Surface], stop: int, object_distance: float) -> float:
+    """
+    Return the widest stop diameter whose paraxial axial beam every clear semi-diameter passes.
+
+    The paraxial marginal ray from the axial object point (height 1 at the first vertex for
+    an object at infinity, else slope 1 from the object) has height y_i at vertex i; a stop of
+    radius rho fills surface i to rho |y_i / y_stop|, which must stay within its
+    semi-diameter s_i: rho <= s_i |y_stop / y_i|.
+
+    :param built: the surfaces.
+    :param stop: the stop's index.
+    :param object_distance: the object's distance before the first vertex (``math.inf``).
+    :return: the diameter in mm (``math.inf`` when no semi-diameter limits it).
+    """
+    y, nu, index = (1.0, 0.0, 1.0) if math.isinf(object_distance) else \
+        (object_distance, 1.0, 1.0)
+    heights = []
+    for surface in built:
+        heights.append(y)
+        nu -= (surface.refractive_index - index) * surface.curvature_per_mm * y
+        index = surface.refractive_index
+        y += surface.thickness_mm * nu / index
+    y_stop = abs(heights[stop])
+    if y_stop == 0.0:
+        return math.inf
+    limits = [s.semi_diameter_mm * y_stop / abs(h) for i, (s, h) in enumerate(zip(built, heights))
+              if i != stop and s.semi_diameter_mm > 0.0 and h != 0.0]
+    # A hair inside the limit, so the model's own check (the same paraxial ray) passes.
+    return 2.0 * min(limits) * (1.0 - 1e-9) if limits else math.inf
 
 
 def _comments(lens: ZmxLens, wavelength: float, efl: float, distance: float) -> list[str]:

@@ -105,12 +105,13 @@ def chief_ray_scale(prescription: Prescription, distance: float, front_principal
             return math.nan
         y, nu = distance, -a_s * distance / b_s
     else:
-        # Parallel rays of slope u = 1; choose the height at z0 to hit the stop centre.
+        # Parallel rays from a scene point above the axis travel downwards: slope u = -1
+        # (tan theta = 1); choose the height at z0 to hit the stop centre.
         a_s = _ray_height(prescription, z0, 1.0, 0.0, z_stop)
         b_s = _ray_height(prescription, z0, 0.0, 1.0, z_stop)
         if a_s == 0.0:
             return math.nan
-        y, nu = -b_s * n0 / a_s, n0
+        y, nu = b_s * n0 / a_s, -n0
     return -_ray_height(prescription, z0, y, nu, z_mm)
 
 

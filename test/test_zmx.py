@@ -77,7 +77,7 @@ MOFF   0   1 "" 0 0 0 1 1 0 0.0 "" 0
 
 def fixed_index(lens, surface, wavelength_nm):
     """Resolve every glass to n = 1.5 (the tests of geometry need no catalog)."""
-    return Medium(f'X:{surface.glass}' if surface.glass else '', 1.5 if surface.glass else 1.0)
+    return Medium('', 1.5 if surface.glass else 1.0)
 
 
 def imported(text: str, name: str = 'lens.zmx'):
@@ -133,7 +133,10 @@ def test_lens_units_are_converted():
             .replace('PARM 3 -2e-9', 'PARM 3 -2e-4'))
     a, b = imported(text).values, imported(SINGLET).values
     for key in b:
-        assert_allclose(a[key], b[key], rtol=1e-12, err_msg=key)
+        if key == 'lens.surfaces.glass':
+            assert a[key] == b[key]
+        else:
+            assert_allclose(a[key], b[key], rtol=1e-12, err_msg=key)
 
 
 def test_pickup_glass_and_a_dummy_surface():
@@ -287,8 +290,9 @@ def test_fuzz_flips_and_truncations_refuse_cleanly(cut, flips):
         assert str(err).startswith('fuzz.zmx')
         return
     for value in result.values.values():
-        assert all(map(math.isfinite, value)) if isinstance(value, list) else \
-            math.isfinite(value)
+        numbers = [v for v in (value if isinstance(value, list) else [value])
+                   if not isinstance(v, str)]
+        assert all(map(math.isfinite, numbers))
 
 
 def test_real_file_with_a_finite_object():
@@ -296,7 +300,8 @@ def test_real_file_with_a_finite_object():
     from mechdeconv_ros.model import make_prescription
     from mechdeconv_ros.params import check_values
 
-    values = import_zmx(FILES / 'US05831776-1.zmx', resolve=fixed_index).values
+    # (The file's 248 nm is outside lens.wavelength_nm's range: the geometry needs none.)
+    values = import_zmx(FILES / 'US05831776-1.zmx', 550.0, resolve=fixed_index).values
     assert len(values['lens.surfaces.radius_mm']) == 42 and values['lens.stop_surface'] == 19
     z_h = paraxial(make_prescription(check_values(values))).front_principal_z_mm
     assert_allclose(values['scene.distance_mm'], 110.8588354359 + z_h, rtol=1e-12)

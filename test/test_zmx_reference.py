@@ -25,6 +25,8 @@ import math
 from pathlib import Path
 
 from mechdeconv_ros.lens_import import import_zmx, Medium
+from mechdeconv_ros.model import build_model
+from mechdeconv_ros.params import check_values
 from mechdeconv_ros.raytrace import paraxial, Prescription, Surface, trace_field_angles
 from mechdeconv_ros.raytrace import vertex_z
 from mechdeconv_ros.zmx import LensImportError
@@ -49,7 +51,7 @@ REFUSED = {
 def optiland_indices(ref: dict):
     """Return a resolver giving each medium optiland's index (file surface n -> media[n])."""
     def resolve(lens, surface, wavelength_nm):
-        return Medium(surface.glass, ref['media'][surface.number]['index'])
+        return Medium('', ref['media'][surface.number]['index'])
     return resolve
 
 
@@ -105,6 +107,12 @@ def test_geometry_matches_optiland(key):
     assert_allclose(vertex_z(lens), np.array(ref['vertex_z_mm'][:-1]) - ref['vertex_z_mm'][0],
                     atol=1e-9)
     compare(key, values)
+    # The model builds from the values as written, with the sensor at the file's image
+    # surface: the raw focal length is the chief-ray scale there.
+    pitch = ref['tolerance_pixel_um']
+    model = build_model(check_values({**values, 'sensor.pixel_size_x_um': pitch,
+                                      'sensor.pixel_size_y_um': pitch}), 640, 480)
+    assert model.K[0, 0] > 0.0
 
 
 def test_an_asphere_and_a_utf16_file_are_among_them():
