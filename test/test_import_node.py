@@ -46,7 +46,13 @@ def test_imported_params_file_runs_the_node(tmp_path: Path, capsys) -> None:
         with RosClient(domain) as client:
             client.wait_until_answering()
             got = client.get_parameters('lens.surfaces.radius_mm', 'lens.stop_surface',
-                                        'lens.surfaces.refractive_index')
+                                        'lens.surfaces.refractive_index',
+                                        'lens.surfaces.glass', 'lens.wavelength_nm',
+                                        'lens.image_distance_mm')
+            assert list(got['lens.surfaces.glass']) == values['lens.surfaces.glass']
+            assert 'SCHOTT:N-BK7' in values['lens.surfaces.glass']
+            assert got['lens.wavelength_nm'] == values['lens.wavelength_nm'] == 587.6
+            assert got['lens.image_distance_mm'] == values['lens.image_distance_mm'] > 40.0
             npt.assert_array_equal(got['lens.surfaces.radius_mm'],
                                    values['lens.surfaces.radius_mm'])
             npt.assert_array_equal(got['lens.surfaces.refractive_index'],

@@ -285,7 +285,7 @@ def test_fuzz_flips_and_truncations_refuse_cleanly(cut, flips):
     data = bytes(data[:cut] if cut < len(REAL) // 2 or not flips else data)
     try:
         lens = parse(decode(data, 'fuzz.zmx'), 'fuzz.zmx')
-        result = zmx_values(lens, resolve=fixed_index)
+        result = zmx_values(lens) if HAVE_GLASS else zmx_values(lens, resolve=fixed_index)
     except LensImportError as err:
         assert str(err).startswith('fuzz.zmx')
         return
