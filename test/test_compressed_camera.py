@@ -56,7 +56,7 @@ def camera_overrides(**extra: object) -> list[Parameter]:
     values = load_params_file(CASE2)
     params = [Parameter(n, value=values[n]) for n in values
               if n.startswith(('lens.', 'sensor.', 'scene.'))
-              and not n.startswith('lens.surfaces.')]
+              and not n.startswith(('lens.surfaces.', 'lens.datasheet.'))]
     return params + [Parameter(k.replace('__', '.'), value=v) for k, v in extra.items()]
 
 
