@@ -131,7 +131,7 @@ def test_tolerances_perturb_the_glass_index() -> None:
 ], ids=['unknown', 'ambiguous', 'wavelength', 'surface-unknown', 'surface-wavelength',
         'length', 'thick-name-in-prescription', 'surface-names-in-thick', 'model-vd'])
 def test_refusals_name_the_parameter_and_surface(values: dict, parameter: str,
-                                                  needles: list[str]) -> None:
+                                                 needles: list[str]) -> None:
     with pytest.raises(ModelError) as err:
         build_model(values)
     assert err.value.parameter == parameter, str(err.value)

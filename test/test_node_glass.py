@@ -20,8 +20,8 @@ import pytest
 from rclpy.parameter import Parameter
 from ros_helpers import make_image
 from test_node import (  # noqa: F401 - harness, outputs: fixtures of this module too
-    _exchange_until_model, assert_camera_infos, double, expected_model, harness, Harness,
-    outputs, Outputs, SMALL, test_pattern)
+    _exchange_until_model, assert_camera_infos, double, expected_model, Harness, harness,
+    Outputs, outputs, SMALL, test_pattern)
 
 pytestmark = pytest.mark.ros
 
@@ -31,8 +31,8 @@ def string(name: str, value: str) -> Parameter:
     return Parameter(name, Parameter.Type.STRING, value)
 
 
-def test_wavelength_set_rebuilds_with_the_glass_index(harness: Harness,
-                                                      outputs: Outputs) -> None:
+def test_wavelength_set_rebuilds_with_the_glass_index(
+        harness: Harness, outputs: Outputs) -> None:  # noqa: F811 - test_node's fixtures
     width, height = SMALL
     src = test_pattern(width, height)
     msg = make_image(src, 'mono8')
@@ -84,7 +84,8 @@ def test_wavelength_set_rebuilds_with_the_glass_index(harness: Harness,
     assert_camera_infos(_exchange_until_model(harness, outputs, msg, model), model)
 
 
-def test_surface_glasses_are_a_string_array(harness: Harness, outputs: Outputs) -> None:
+def test_surface_glasses_are_a_string_array(
+        harness: Harness, outputs: Outputs) -> None:  # noqa: F811 - test_node's fixtures
     width, height = SMALL
     msg = make_image(test_pattern(width, height), 'mono8')
     assert harness.client.get_parameters('lens.surfaces.glass') == {'lens.surfaces.glass': []}
