@@ -121,14 +121,19 @@ def table_values(path: str | Path, focal_length_mm: float) -> Imported:
     if not (math.isfinite(focal_length_mm) and focal_length_mm > 0.0):
         raise LensImportError(f'--focal-length-mm {focal_length_mm:g}: must be a positive '
                               'focal length in mm')
+    from mechdeconv_ros.datasheet import table_params
+
     angles, heights, ri = read_table(path)
-    values: dict = {'lens.focal_length_mm': float(focal_length_mm),
-                    'lens.datasheet.field_angle_deg': angles,
-                    'lens.datasheet.image_height_mm': heights,
-                    # A datasheet's distortion table is for an object at infinity.
-                    'scene.distance_mm': 0.0}
-    if ri:
-        values['lens.datasheet.relative_illumination'] = ri
+    try:
+        # The model's own check of a table (heights 0 at 0 deg, the angle range, ...).
+        values: dict = table_params(angles, heights, focal_length_mm, ri or None)
+    except ValueError as err:
+        raise LensImportError(f'{path}: {err}') from None
+    values.pop('lens.surfaces.radius_mm', None)
+    if not ri:
+        values.pop('lens.datasheet.relative_illumination', None)
+    # A datasheet's distortion table is for an object at infinity.
+    values['scene.distance_mm'] = 0.0
     comments = [f'Imported by `mechdeconv import` from {Path(path).name}: a datasheet '
                 f'distortion table ({len(angles)} rows, to {angles[-1]:g} deg, '
                 f'{heights[-1]:g} mm), f = {focal_length_mm:g} mm.',

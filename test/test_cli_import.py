@@ -69,8 +69,9 @@ def test_csv_third_column_and_values(tmp_path):
     ('0,0\n10,0.7\n', '2 rows'),
     ('0,0\n-10,0.7\n20,1.4\n', 'outside 0 to 180'),
     ('', '0 rows'),
+    ('0,0.1\n10,0.7\n20,1.4\n', 'image_height_mm: is 0.1 mm at 0 deg'),
 ], ids=['angle-not-monotonic', 'height-not-monotonic', 'text-row', 'four-columns',
-        'ragged', 'too-short', 'negative-angle', 'empty'])
+        'ragged', 'too-short', 'negative-angle', 'empty', 'not-zero-on-axis'])
 def test_csv_refusals_name_the_line(tmp_path, text, expected):
     path = tmp_path / 'bad.csv'
     path.write_text(text)
