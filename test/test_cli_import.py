@@ -145,3 +145,14 @@ def test_zmx_import_at_another_wavelength(tmp_path, capsys):
     n_ir = load_params_file(near_ir)['lens.surfaces.refractive_index']
     for a, b in zip(n_d, n_ir):
         assert (a == b == 1.0) or 0.0 < a - b < 0.03
+
+
+@needs_glass
+def test_wavelength_outside_the_range_is_refused(tmp_path, capsys):
+    out = tmp_path / 'lens.yaml'
+    status, _, err = run(capsys, 'import', ZMX / 'edmund_55278.zmx', '-o', out,
+                         '--wavelength-nm', 100)
+    assert status == 2 and 'wavelength 100 nm (given) is outside 350 to 2500 nm' in err
+    status, _, err = run(capsys, 'import', ZMX / 'US05831776-1.zmx', '-o', out)
+    assert status == 2 and "248 nm (the file's primary wavelength)" in err
+    assert not out.exists()
