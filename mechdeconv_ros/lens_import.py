@@ -47,7 +47,7 @@ import textwrap
 from typing import Any, Callable
 
 from mechdeconv_ros.params import ASPHERE_POWERS, check_values, SPECS, to_params_yaml
-from mechdeconv_ros.raytrace import paraxial, Prescription, Surface
+from mechdeconv_ros.prescription import paraxial, Prescription, Surface
 from mechdeconv_ros.zmx import LensImportError, read, ZmxLens, ZmxSurface
 
 #: The GLAS line's nd / vd when a catalog glass carries no data of its own (Zemax writes
