@@ -10,6 +10,8 @@ Commands::
     mechdeconv plot --params FILE OUT.png
     mechdeconv camera-info --params FILE [--width W --height H]
     mechdeconv vignetting --params FILE [--png OUT.png] [--lensfun]
+    mechdeconv import LENS.zmx -o lens.yaml [--wavelength-nm NM]
+    mechdeconv import TABLE.csv --focal-length-mm F -o lens.yaml
 
 ``--params`` takes a ROS 2 params file (``/**: ros__parameters:``) such as config/case2.yaml;
 ``-p name=value`` overrides one parameter. Bad input prints one line naming the parameter or
@@ -274,6 +276,39 @@ def cmd_vignetting(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_import(args: argparse.Namespace) -> int:
+    """Import a .zmx lens file or a datasheet CSV table into a params file."""
+    from mechdeconv_ros.lens_import import import_zmx, params_text, write_atomically
+    from mechdeconv_ros.zmx import LensImportError
+
+    source = Path(args.lens)
+    try:
+        if source.suffix.lower() == '.csv':
+            from mechdeconv_ros.datasheet_csv import table_values
+            if args.focal_length_mm is None:
+                raise UsageError(f'{source}: a datasheet table needs --focal-length-mm F')
+            imported = table_values(source, args.focal_length_mm)
+        else:
+            if args.focal_length_mm is not None:
+                raise UsageError('--focal-length-mm is for a datasheet table (.csv): a .zmx '
+                                 'file has its own focal length')
+            print(f'mechdeconv: importing {source}', file=sys.stderr)
+            imported = import_zmx(source, args.wavelength_nm)
+        unknown = sorted(set(imported.values) - set(SPECS))
+        if unknown:
+            raise UsageError(f'{source}: this build has no parameter {unknown[0]}')
+        check_values(imported.values)
+        text = params_text(imported)
+        write_atomically(args.output, text)
+    except LensImportError as err:
+        raise UsageError(str(err)) from None
+    except ValueError as err:
+        raise UsageError(f'{source}: {err}') from None
+    _warn_once(args, imported.warnings)
+    print(f'mechdeconv: wrote {args.output}', file=sys.stderr)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """
     Build the argument parser.
@@ -316,6 +351,19 @@ def build_parser() -> argparse.ArgumentParser:
     vignetting.add_argument('--lensfun', action='store_true',
                             help='print a lensfun <vignetting model="pa"/> entry')
     vignetting.set_defaults(func=cmd_vignetting)
+    lens_import = sub.add_parser(
+        'import', help='write a params file from a .zmx lens file or a datasheet CSV table',
+        description='Write a ROS 2 params file (prescription mode) from a Zemax .zmx lens '
+                    'file, or (datasheet mode) from a CSV table of field angle (deg) and '
+                    'real image height (mm). Add the sensor to the written file.')
+    lens_import.add_argument('lens', help='LENS.zmx or TABLE.csv')
+    lens_import.add_argument('-o', '--output', required=True, metavar='lens.yaml',
+                             help='params file to write (written whole or not at all)')
+    lens_import.add_argument('--wavelength-nm', type=float, metavar='NM',
+                             help="wavelength of the indices (default: the file's primary)")
+    lens_import.add_argument('--focal-length-mm', type=float, metavar='F',
+                             help='effective focal length of a datasheet table')
+    lens_import.set_defaults(func=cmd_import)
     return parser
 
 
