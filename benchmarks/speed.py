@@ -10,7 +10,7 @@ at 640x480, 1280x720, 1920x1080 and 3840x2160, rgb8 and mono8, with the Case 2 l
 
 Per frame (the output written into a preallocated array):
 
-* **ours**: ``Rectifier.correct(src, dst)`` (fixed-point CV_16SC2 + CV_16UC1 maps, bilinear);
+* **ours**: ``Rectifier.correct(src, dst)`` (2 x CV_32FC1 maps, bilinear);
 * **OpenCV**: ``cv2.remap`` bilinear with the maps of ``cv2.initUndistortRectifyMap`` built from
   our equivalent K, D and K_new, as 2 x CV_32FC1, CV_32FC2 and CV_16SC2 + CV_16UC1, each with
   1 and 2 threads (``cv2.setNumThreads``); the best of these six is the reference;
