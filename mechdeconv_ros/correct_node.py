@@ -57,7 +57,7 @@ import cv2
 from diagnostic_msgs.msg import DiagnosticArray
 from mechdeconv_ros.diagnostics import diagnostics_message, FrameStats
 from mechdeconv_ros.frame_io import (
-    COMPRESSED_PARAMS, compressed_output, compressed_settings, FrameRefused, read_compressed,
+    compressed_output, COMPRESSED_PARAMS, compressed_settings, FrameRefused, read_compressed,
     read_image, sensor_qos)
 from mechdeconv_ros.image_msgs import camera_infos_from_model, Encoding, OutputImagePool
 from mechdeconv_ros.live_model import (  # noqa: F401 - MAX_SURFACES: the node's limit
