@@ -260,7 +260,8 @@ def measure_rung(probe: Probe, rung: str, width: int, height: int, env: Mapping[
     try:
         stage_frames = json.loads(stage_file.read_text())['frames']
     except (OSError, ValueError, KeyError):
-        result['errors'].append(f'{rung}: no stage times written')
+        if rung != 'baseline':          # another checkout may predate the stage clock
+            result['errors'].append(f'{rung}: no stage times written')
         stage_frames = []
     received = {stamp: recv for recv, stamp in frames}
     window = [f for f in stage_frames if f['stamp_ns'] in received]
