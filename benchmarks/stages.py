@@ -397,7 +397,7 @@ def run(out_dir: Path = RESULTS, quick: bool = False, baseline: str = '') -> dic
 # ---------------------------------------------------------------------------------------------
 
 def tables(doc: Mapping[str, Any]) -> list[str]:
-    """Return the markdown of the stage tables (one per size) and the latency target."""
+    """Return the markdown: one stage table per frame size, and the latency target."""
     best = best_runs(doc['runs'])
     rungs = [r for r in doc['rungs'] if any(k[1] == r for k in best)]
     lines = ["### Where a frame's time goes (stage by stage, 30 Hz rgb8, shm profile)", '',
