@@ -185,12 +185,15 @@ class Rectifier:
     per model, where the gain limit ends the corrected field.
     """
 
-    def __init__(self, model: LensModel, vignetting: bool | None = None) -> None:
+    def __init__(self, model: LensModel, vignetting: bool | None = None,
+                 fixed_point: bool = False) -> None:
         """
         Build the float maps (``map1`` = x, ``map2`` = y, CV_32FC1, raw-image pixels).
 
         :param model: the lens model.
         :param vignetting: build the vignetting gain map; None = ``output.vignetting_correction``.
+        :param fixed_point: convert the maps to CV_16SC2 + CV_16UC1 (the same output; the
+            stage benchmark compares the two forms in a running relay).
         """
         self.model = model
         if vignetting is None:
@@ -210,6 +213,8 @@ class Rectifier:
                     f'inside the {curve.corner_height_mm:.3g} mm corner: the corrected field '
                     'ends there (black beyond)')
         self.map1, self.map2, self.gain = _build_maps(model, table)
+        if fixed_point:
+            self.map1, self.map2 = cv2.convertMaps(self.map1, self.map2, cv2.CV_16SC2)
         self._nearest_map: np.ndarray | None = None
         self._gains: dict[int, Map] = {}
 
@@ -240,8 +245,12 @@ class Rectifier:
         to the nearest source pixel (``cv2.convertMaps`` with ``nninterpolation``).
         """
         if self._nearest_map is None:
-            self._nearest_map = cv2.convertMaps(self.map1, self.map2, cv2.CV_16SC2,
-                                                nninterpolation=True)[0]
+            if self.map1.dtype == np.int16:         # fixed point: to the nearer 1/32 px
+                self._nearest_map = cv2.convertMaps(*cv2.convertMaps(
+                    self.map1, self.map2, cv2.CV_32FC1), cv2.CV_16SC2, nninterpolation=True)[0]
+            else:
+                self._nearest_map = cv2.convertMaps(self.map1, self.map2, cv2.CV_16SC2,
+                                                    nninterpolation=True)[0]
         return self._nearest_map
 
     @property
