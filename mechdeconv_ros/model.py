@@ -55,7 +55,7 @@ from mechdeconv_ros.equivalent import (
 from mechdeconv_ros.illumination import Illumination
 from mechdeconv_ros.lens_params import make_prescription
 from mechdeconv_ros.lens_source import LensSource, source_from_values
-from mechdeconv_ros.model_base import FloatArray, ModelError, scene_distance
+from mechdeconv_ros.model_base import FloatArray, half_diagonal_mm, ModelError, scene_distance
 from mechdeconv_ros.params import check_values, INTERPOLATIONS, MAX_FRAME_PIXELS, ParamValue
 from mechdeconv_ros.prescription import Prescription
 from mechdeconv_ros.radial_map import (
@@ -142,6 +142,11 @@ class LensModel:
         if not self._summary_cache:
             self._summary_cache.update(summarize(self))
         return self._summary_cache
+
+    @property
+    def half_diagonal_mm(self) -> float:
+        """Return the raw image's half-diagonal on the sensor (to the outer pixel edges), mm."""
+        return half_diagonal_mm(self.width, self.height, self.pixel_mm)
 
     @property
     def prescription(self) -> Prescription | None:
@@ -360,7 +365,7 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
 
     # Pass 1: trace the field by angle (theta uniform) far enough to cover the raw image (its
     # edge, not the pixel centre), or to the end of the field the lens passes.
-    edge_real = math.hypot(w / 2.0 * px, h / 2.0 * py)
+    edge_real = half_diagonal_mm(w, h, (px, py))
     theta_max = min(cap, 1.5 * edge_real / v)
     for _ in range(12):
         coarse = trace_curve(source, distance, v, theta_max * v, COARSE_SAMPLES, 'equidistant')
