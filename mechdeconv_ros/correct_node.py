@@ -7,7 +7,8 @@ Topics (relative names: namespaces and remaps apply; ``/diagnostics`` is absolut
 ``image_raw`` (sensor_msgs/Image) or, with ``image_transport:=compressed`` (read at start-up,
 as image_proc's), the RESOLVED ``image_raw`` + ``/compressed`` (sensor_msgs/CompressedImage,
 decoded by :mod:`~mechdeconv_ros.frame_io`), subscribed only while an output has a subscriber
-unless ``lazy_subscription`` is false; out, ``image_rect`` (the input's encoding and header),
+unless ``lazy_subscription`` is false; out, ``image_rect`` (the input's encoding and header;
+Bayer input is demosaiced first, by ``debayer``, and published as rgb8 / rgb16),
 ``camera_info`` (raw K and the equivalent D), ``camera_info_rect`` (K_new, D = 0),
 ``image_rect/compressed`` (only while subscribed) and ``/diagnostics`` (1 Hz,
 :mod:`~mechdeconv_ros.diagnostics`). README "Node API" has the details.
@@ -31,9 +32,10 @@ from typing import Any, Callable
 
 import cv2
 from diagnostic_msgs.msg import DiagnosticArray
+from mechdeconv_ros.debayer import Demosaicer
 from mechdeconv_ros.diagnostics import diagnostics_message, FrameStats
 from mechdeconv_ros.frame_io import (
-    compressed_output, FrameRefused, read_compressed, read_image, sensor_qos)
+    compressed_output, demosaic_frame, FrameRefused, read_compressed, read_image, sensor_qos)
 from mechdeconv_ros.image_msgs import camera_infos_from_model, Encoding, OutputImagePool
 from mechdeconv_ros.live_model import (  # noqa: F401 - MAX_SURFACES: the node's limit
     changes_of, FrameDropped, LiveModel, MAX_SURFACES)
@@ -77,6 +79,7 @@ class CorrectNode(Node):
         self._logged: dict[str, float] = {}         # kind of error -> time last logged, s
         self._channels = 1          # of the last frame: the rebuild prepares its gain map
         self._depth_gain_noted = False
+        self._demosaicer = Demosaicer()     # Bayer input (issue #20)
         self._warned_model: Any = None
         super().__init__('correct_node', **kwargs)
         self._live = LiveModel(
@@ -181,6 +184,13 @@ class CorrectNode(Node):
         self._stats.frames_in += 1
         try:
             pixels, encoding = read(msg, self._stats)
+            # --- Bayer input (issue #20): demosaic, then correct as rgb8 / rgb16 ---
+            if encoding.bayer:
+                pixels, encoding, note = demosaic_frame(
+                    pixels, encoding, self._demosaicer, str(self._live.value('debayer')),
+                    self._stats)
+                if note:
+                    self.get_logger().info(note)
         except FrameRefused as refused:
             return self._frame_error(refused.kind, refused.error, refused.line)
         self._correct(msg.header, pixels, encoding, start)

@@ -40,6 +40,14 @@ IMAGE_TRANSPORTS = ('raw', 'compressed')
 
 #: Allowed values of ``output.interpolation`` and the OpenCV flag names they stand for.
 INTERPOLATIONS = ('nearest', 'linear', 'cubic', 'lanczos4')
+#: Allowed values of ``debayer``: OpenCV's demosaicing methods (mechdeconv_ros.debayer).
+DEBAYER_METHODS = ('bilinear', 'edge_aware', 'vng')
+#: image_proc's default: its debayer node declares ``debayer`` = 3, VNG (ros-perception/
+#: image_pipeline, image_proc/src/debayer.cpp and include/image_proc/debayer.hpp).
+DEFAULT_DEBAYER = 'vng'
+#: The Bayer tiles the node demosaics, named as the ROS bayer_* encodings (top-left pixel
+#: first, row by row).
+BAYER_PATTERNS = ('rggb', 'bggr', 'gbrg', 'grbg')
 
 
 @dataclass(frozen=True)
@@ -203,6 +211,13 @@ SCHEMA: tuple[ParamSpec, ...] = (
               '(sensor_msgs/Image); compressed subscribes the resolved image_raw + '
               '/compressed (sensor_msgs/CompressedImage, JPEG or PNG as image_transport '
               'writes it) and decodes every frame.', choices=IMAGE_TRANSPORTS, read_only=True),
+    ParamSpec('debayer', 'string', DEFAULT_DEBAYER, '',
+              'Demosaicing of Bayer input, published as rgb8 / rgb16. The node reads '
+              'bayer_rggb8, bayer_bggr8, bayer_gbrg8, bayer_grbg8 and their 16-bit forms and '
+              "demosaics them with OpenCV's bilinear, edge_aware (EA) or vng. Default vng, as "
+              "image_proc's debayer node (ros-perception/image_pipeline image_proc/src/"
+              'debayer.cpp declares debayer = 3, VNG). OpenCV has no 16-bit VNG: 16-bit '
+              'mosaics then use edge_aware (logged once).', choices=DEBAYER_METHODS),
     # --- image_rect/compressed output (image_transport's parameter names) ---
     ParamSpec('image_rect.compressed.format', 'string', 'jpeg', '',
               'Codec of image_rect/compressed (sensor_msgs/CompressedImage, published only '
