@@ -9,6 +9,9 @@ setup(
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*', 'benchmarks', 'benchmarks.*', 'tools',
                                     'tools.*']),
+    # The glass catalogs (mechdeconv_ros/glass.py) travel inside the package for both install
+    # routes (pip wheel and colcon's setup.py build).
+    package_data={package_name: ['data/*.csv']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),

@@ -90,6 +90,20 @@ def test_build_installs_the_executable_and_the_config(install: Path) -> None:
     assert (install / PACKAGE / 'share' / 'ament_index' / 'resource_index' / 'packages'
             / PACKAGE).is_file()
     assert (site_packages(install) / PACKAGE / 'correct_node.py').is_file()
+    # Package data (the glass catalogs) is installed with the modules.
+    assert (site_packages(install) / PACKAGE / 'data' / 'glass_catalogs.csv').is_file()
+
+
+def test_installed_package_reads_its_glass_catalogs(install: Path, tmp_path: Path) -> None:
+    env = installed_env(install, next_domain_id())
+    probe = subprocess.run(
+        [sys.executable, '-c', 'import mechdeconv_ros.glass as g; '
+         'print(g.__file__); print(g.refractive_index("N-BK7", 587.5618))'],
+        env=env, cwd=tmp_path, capture_output=True, text=True, timeout=60)
+    assert probe.returncode == 0, probe.stderr
+    where, index = probe.stdout.split()
+    assert Path(where).is_relative_to(install), where
+    assert abs(float(index) - 1.5168) < 1e-5
 
 
 def test_installed_node_corrects_a_frame_and_exits_cleanly(
