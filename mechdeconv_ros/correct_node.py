@@ -37,6 +37,7 @@ from mechdeconv_ros.diagnostics import diagnostics_message, FrameStats
 from mechdeconv_ros.frame_io import (
     compressed_output, demosaic_frame, FrameRefused, read_compressed, read_image, sensor_qos)
 from mechdeconv_ros.image_msgs import camera_infos_from_model, Encoding, OutputImagePool
+from mechdeconv_ros.lateral_color import COLOUR_ORDER
 from mechdeconv_ros.live_model import (  # noqa: F401 - MAX_SURFACES: the node's limit
     changes_of, FrameDropped, LiveModel, MAX_SURFACES)
 from mechdeconv_ros.node_main import log_function, run_node
@@ -80,6 +81,11 @@ class CorrectNode(Node):
         self._channels = 1          # of the last frame: the rebuild prepares its gain map
         self._depth_gain_noted = False
         self._demosaicer = Demosaicer()     # Bayer input (issue #20)
+        # Lateral colour (issue #20): the channel colours of the last frame (the rebuild
+        # folds its maps for them) and the encodings already told that they ignore it.
+        self._colours: tuple[int, ...] | None = None
+        self._colourless_noted: set[str] = set()
+        self._lateral_logged: Any = None
         self._warned_model: Any = None
         super().__init__('correct_node', **kwargs)
         self._live = LiveModel(
@@ -159,6 +165,17 @@ class CorrectNode(Node):
         so a race between the two callers at worst logs it twice.
         """
         rectifier = Rectifier(model)
+        if rectifier.colour is not None:   # lateral colour (issue #20)
+            rectifier.prepare_colours(self._colours)
+            if model is not self._lateral_logged:
+                self._lateral_logged = model
+                traces = model.lateral_color()
+                self.get_logger().info(
+                    f'output.lateral_color_correction: R, G, B traced at '
+                    f"{', '.join(f'{ch.wavelength_nm:g}' for ch in traces.channels)} nm and "
+                    f'mapped in {rectifier.lateral_color_ms:.1f} ms (traces '
+                    f'{traces.trace_ms:.1f} ms); largest R-B separation on the raw image '
+                    f'{traces.max_rb_separation_px:.3g} px')
         if rectifier.gain is not None:
             rectifier.gain_for(self._channels)
             # (The allocator warm-up builds a model's maps again: warn once per model.)
@@ -210,9 +227,17 @@ class CorrectNode(Node):
             model = active.model
             out = self._pool.get(model.out_width, model.out_height, encoding.name)
             # Depth is never gain-corrected (a distance divided by RI means nothing).
+            colours = COLOUR_ORDER.get(encoding.name)
             active.rectifier.correct(pixels, out.pixels, nearest=encoding.depth,
-                                     gain=not encoding.depth)
+                                     gain=not encoding.depth, colours=colours)
             self._channels = 1 if pixels.ndim == 2 else int(pixels.shape[2])
+            self._colours = colours
+            if active.rectifier.colour is not None and colours is None and \
+                    encoding.name not in self._colourless_noted:
+                self._colourless_noted.add(encoding.name)
+                self.get_logger().info(
+                    f'output.lateral_color_correction: {encoding.name} has no known colour '
+                    'channels; it is corrected with the one map of the model')
             if encoding.depth and active.rectifier.gain is not None and \
                     not self._depth_gain_noted:
                 self._depth_gain_noted = True

@@ -141,16 +141,18 @@ class ChannelSource(TracedSource):
     Same geometry, stop plane and object plane as ``base``; only the glass indices change.
     """
 
-    def __init__(self, base: TracedSource, wavelength_nm: float) -> None:
+    def __init__(self, base: TracedSource, wavelength_nm: float,
+                 values: Mapping[str, Any] | None = None) -> None:
         """
         Make the channel's lens.
 
         :param base: the model's lens source (a traced one).
         :param wavelength_nm: the channel's wavelength.
+        :param values: the values naming the glasses (default: the base's).
         :raises ModelError: see :func:`prescription_at`.
         """
-        super().__init__(base.values, prescription_at(base.prescription, base.values,
-                                                      wavelength_nm))
+        values = base.values if values is None else values
+        super().__init__(values, prescription_at(base.prescription, values, wavelength_nm))
         self.mode = base.mode
         self.wavelength_nm = float(wavelength_nm)
         self._base = base
@@ -209,15 +211,21 @@ class LateralColor:
     #: The wavelength the lens is focused at (the model's).
     focus_wavelength_nm: float
 
-    def report(self, corner_angle_rad: float) -> dict[str, Any]:
+    def report(self, model: LensModel) -> dict[str, Any]:
         """
         Return the JSON-ready report.
 
-        :param corner_angle_rad: the field angle of the raw corner (the tables' end).
-        :return: ``channels`` (name, wavelength_nm, field_angle_deg, real_height_mm),
-            ``max_rb_separation_px`` and where, ``trace_ms``, ``focus_wavelength_nm``.
+        :param model: the model traced (its raw corner ends the height tables).
+        :return: ``channels`` (name, wavelength_nm, field_angle_deg, real_height_mm, from the
+            axis to the raw corner's field angle of the green channel, or to the end of its
+            field), ``max_rb_separation_px`` and where, ``trace_ms``, ``focus_wavelength_nm``.
         """
-        theta = np.linspace(0.0, corner_angle_rad, REPORT_SAMPLES)
+        green = self.channels[1].field
+        corner = math.hypot(model.width / 2.0 * model.pixel_mm[0],
+                            model.height / 2.0 * model.pixel_mm[1])
+        end = float(np.interp(min(corner, green.valid_real_mm), green.real_mm,
+                              green.field_angle_rad))
+        theta = np.linspace(0.0, end, REPORT_SAMPLES)
         return {
             'focus_wavelength_nm': self.focus_wavelength_nm,
             'channels': [{
@@ -267,7 +275,7 @@ def trace_channels(model: LensModel) -> LateralColor:
     field = model.field_curve
     traces = []
     for name, wavelength in zip(CHANNELS, wavelengths(values)):
-        source = ChannelSource(base, wavelength)
+        source = ChannelSource(base, wavelength, values)
         traced = trace_angles(source, distance, v, field.field_angle_rad, field)
         if traced.ideal_mm.size < 16:
             raise ModelError(WAVELENGTHS, f'{name} at {wavelength:g} nm: no chief ray reaches '

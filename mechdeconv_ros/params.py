@@ -154,6 +154,10 @@ SCHEMA: tuple[ParamSpec, ...] = (
     *(_a(f'lens.surfaces.asphere_a{p}', f'mm^{1 - p}',
          f'Prescription mode: asphere term a{p} r^{p} of each surface; empty = all 0.',
          -1.0e6, 1.0e6) for p in ASPHERE_POWERS),
+    ParamSpec('lens.channel_wavelengths_nm', 'double_array', [610.0, 550.0, 465.0], 'nm',
+              'Wavelengths [R, G, B] at which the colour channels are traced for '
+              'output.lateral_color_correction (the centroids of a typical sensor\'s colour '
+              'filters).', 200.0, 2500.0),
     _i('lens.stop_surface', 0, '1',
        'Prescription mode: 0-based index of the surface whose axial point the chief ray '
        'crosses (the aperture stop).', 0, 255),
@@ -195,6 +199,13 @@ SCHEMA: tuple[ParamSpec, ...] = (
               'Divide image_rect by the relative illumination traced through the lens '
               '(brighter corners, a flat white wall stays flat); false = a purely geometric '
               'rectification. Depth images (16UC1, 32FC1) are never gain-corrected.'),
+    ParamSpec('output.lateral_color_correction', 'bool', False, '',
+              'Correct lateral colour: remap R, G and B each by the chief rays traced at its '
+              'own wavelength (lens.channel_wavelengths_nm) to the one sensor plane, so the '
+              'three channels register on the corrected image (same K_new and camera_info). '
+              'Needs the glass names (lens.surfaces.glass, or lens.glass for the thick lens). '
+              'rgb8/bgr8/rgb16/bgr16/rgba8/bgra8 and demosaiced Bayer frames only: mono, '
+              '8UC3/8UC4 and depth images ignore it (logged once).'),
     _d('output.max_vignetting_gain', 4.0, '1',
        'Largest gain of the vignetting correction; where the relative illumination is below '
        '1 / this the corrected field ends (black).', 1.0, 1.0e3),

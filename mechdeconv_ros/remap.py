@@ -23,9 +23,12 @@ bilinear remap on our machines, and a nearest-neighbour CV_16SC2 map is kept for
 
 from __future__ import annotations
 
-from typing import Any
+from dataclasses import replace
+import time
+from typing import Any, Sequence
 
 import cv2
+from mechdeconv_ros.channel_remap import ChannelRemap
 from mechdeconv_ros.illumination import Illumination
 from mechdeconv_ros.model import LensModel
 import numpy as np
@@ -176,14 +179,22 @@ class Rectifier:
     output coordinates, :func:`build_gain_map`) and ``correct`` multiplies the remapped frame
     by it in place (cv2.multiply saturates integer images). ``vignetting_warning`` says, once
     per model, where the gain limit ends the corrected field.
+
+    With ``output.lateral_color_correction`` it also holds one map per colour channel
+    (:attr:`colour`, :mod:`mechdeconv_ros.lateral_color`), and ``correct`` given the
+    frame's channel colours (``colours``) remaps each channel with its own map in one pass
+    (:class:`~mechdeconv_ros.channel_remap.ChannelRemap`); ``lateral_color_ms`` is the time
+    of its three traces and maps.
     """
 
-    def __init__(self, model: LensModel, vignetting: bool | None = None) -> None:
+    def __init__(self, model: LensModel, vignetting: bool | None = None,
+                 lateral: bool | None = None) -> None:
         """
         Build the fixed-point maps (bilinear/cubic/lanczos table and nearest-neighbour).
 
         :param model: the lens model.
         :param vignetting: build the vignetting gain map; None = ``output.vignetting_correction``.
+        :param lateral: build the per-channel maps; None = ``output.lateral_color_correction``.
         """
         self.model = model
         if vignetting is None:
@@ -206,6 +217,17 @@ class Rectifier:
         self.map1, self.map2 = cv2.convertMaps(map_x, map_y, cv2.CV_16SC2)
         self._nearest_map: np.ndarray | None = None
         self._gains: dict[int, Map] = {}
+        # --- lateral colour (issue #20): a map per colour channel, on the same K_new ---
+        self.colour: ChannelRemap | None = None
+        self.lateral_color_ms = 0.0
+        if lateral if lateral is not None else bool(
+                model.values.get('output.lateral_color_correction', False)):
+            start = time.perf_counter()
+            maps = [build_float_maps(replace(model, curve=channel.curve, _summary_cache={},
+                                              _illumination_cache={}, _lateral_cache={}))
+                    for channel in model.lateral_color().channels]
+            self.colour = ChannelRemap(maps, model.width, model.height)
+            self.lateral_color_ms = (time.perf_counter() - start) * 1e3
 
     def gain_for(self, channels: int) -> Map | None:
         """
@@ -250,8 +272,18 @@ class Rectifier:
         """Return ``(out_height, out_width)``."""
         return self.model.out_height, self.model.out_width
 
+    def prepare_colours(self, colours: Sequence[int] | None) -> None:
+        """
+        Build the folded per-channel maps for a channel order now (rebuild time).
+
+        :param colours: the colour of each channel (``lateral_color.COLOUR_ORDER``), or None.
+        """
+        if self.colour is not None and colours:
+            self.colour.prepare(colours, self.model.interpolation == cv2.INTER_NEAREST)
+
     def correct(self, src: np.ndarray, dst: np.ndarray | None = None, *,
-                nearest: bool = False, gain: bool = True) -> np.ndarray:
+                nearest: bool = False, gain: bool = True,
+                colours: Sequence[int] | None = None) -> np.ndarray:
         """
         Correct one frame.
 
@@ -262,6 +294,9 @@ class Rectifier:
         :param nearest: use nearest-neighbour regardless of the model's interpolation (depth).
         :param gain: apply the vignetting gain when the Rectifier has one; False for depth
             images, which are never gain-corrected.
+        :param colours: the colour (0 R, 1 G, 2 B) of each channel of ``src``; with lateral
+            colour correction each channel is remapped with its colour's map. None (mono,
+            depth, unknown order): one map for every channel.
         :return: the corrected image (``dst`` when given). Pixels outside the valid field or
             the source are 0.
         :raises ValueError: when ``src`` does not have the model's size.
@@ -269,7 +304,9 @@ class Rectifier:
         if src.shape[:2] != (self.model.height, self.model.width):
             raise ValueError(f'frame is {src.shape[1]}x{src.shape[0]} px but the model is '
                              f'{self.model.width}x{self.model.height} px')
-        if nearest or self.model.interpolation == cv2.INTER_NEAREST:
+        if colours and self.colour is not None and not nearest and src.ndim == 3:
+            out = self.colour.remap(src, colours, self.model.interpolation, dst)
+        elif nearest or self.model.interpolation == cv2.INTER_NEAREST:
             out = cv2.remap(src, self.nearest_map, None, cv2.INTER_NEAREST, dst=dst,
                             borderMode=cv2.BORDER_CONSTANT, borderValue=0)
         else:
