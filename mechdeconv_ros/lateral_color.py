@@ -43,7 +43,7 @@ import math
 import time
 from typing import Any, Mapping, TYPE_CHECKING
 
-from mechdeconv_ros.glass import GlassError, refractive_index
+from mechdeconv_ros.glass import GlassError, lookup
 from mechdeconv_ros.lens_source import TracedSource
 from mechdeconv_ros.model_base import FloatArray, is_prescription_mode, ModelError
 from mechdeconv_ros.prescription import Prescription
@@ -89,7 +89,14 @@ def check_switch(values: Mapping[str, Any]) -> None:
     :param values: checked parameter values.
     :raises ModelError: naming ``output.lateral_color_correction``.
     """
-    if not values.get(SWITCH, False) or has_dispersion(values):
+    if not values.get(SWITCH, False):
+        return
+    if has_dispersion(values):
+        # Every glass must cover every channel's wavelength (cheap: no trace).
+        names = _glass_names(values, len(values.get('lens.surfaces.radius_mm', []) or [0, 0]))
+        for i, name in enumerate(names):
+            for wavelength in wavelengths(values) if name else ():
+                _index(name, wavelength, values, i)
         return
     where = ('lens.surfaces.glass (one glass name per surface, blank for air)'
              if is_prescription_mode(values) else 'lens.glass')
@@ -123,15 +130,22 @@ def prescription_at(base: Prescription, values: Mapping[str, Any],
     surfaces = []
     for i, (surface, name) in enumerate(zip(base.surfaces, names)):
         if name:
-            try:
-                index = refractive_index(name, wavelength_nm)
-            except GlassError as err:
-                parameter = WAVELENGTHS if 'range' in str(err) or 'nm' in str(err) else (
-                    'lens.surfaces.glass' if is_prescription_mode(values) else 'lens.glass')
-                raise ModelError(parameter, f'surface {i}: {err}') from None
-            surface = replace(surface, refractive_index=float(index))
+            surface = replace(surface, refractive_index=_index(name, wavelength_nm, values, i))
         surfaces.append(surface)
     return replace(base, surfaces=tuple(surfaces))
+
+
+def _index(name: str, wavelength_nm: float, values: Mapping[str, Any], surface: int) -> float:
+    """Return a glass's index, refusing an unknown name or an uncovered wavelength."""
+    try:
+        found = lookup(name)
+    except GlassError as err:
+        raise ModelError('lens.surfaces.glass' if is_prescription_mode(values) else 'lens.glass',
+                         f'surface {surface}: {err}') from None
+    try:
+        return float(found.index(wavelength_nm))
+    except GlassError as err:
+        raise ModelError(WAVELENGTHS, f'surface {surface}: {err}') from None
 
 
 class ChannelSource(TracedSource):

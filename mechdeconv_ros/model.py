@@ -217,6 +217,12 @@ class LensModel:
             90 deg, ``real_height_mm``), at most 257 samples.
         """
         out = dict(self.summary)
+        colour = None
+        if lateral_color.has_dispersion(self.values):
+            try:
+                colour = self.lateral_color().report(self)
+            except ModelError as err:
+                out['warnings'] = list(out['warnings']) + [f'lateral colour: {err}']
         try:
             illumination: dict[str, Any] | None = self.illumination().report()
         except ValueError as err:
@@ -235,8 +241,7 @@ class LensModel:
                                   for fit in self.equivalent_fits},
             'max_displacement_px': self.max_displacement_px,
             'relative_illumination': illumination,
-            'lateral_color': (self.lateral_color().report(self)
-                              if lateral_color.has_dispersion(self.values) else None),
+            'lateral_color': colour,
         })
         field = out.pop('_field_curve')
         theta, real = field['theta_rad'], field['real_mm']

@@ -155,9 +155,9 @@ SCHEMA: tuple[ParamSpec, ...] = (
          f'Prescription mode: asphere term a{p} r^{p} of each surface; empty = all 0.',
          -1.0e6, 1.0e6) for p in ASPHERE_POWERS),
     ParamSpec('lens.channel_wavelengths_nm', 'double_array', [610.0, 550.0, 465.0], 'nm',
-              'Wavelengths [R, G, B] at which the colour channels are traced for '
-              'output.lateral_color_correction (the centroids of a typical sensor\'s colour '
-              'filters).', 200.0, 2500.0),
+              'Wavelengths [R, G, B] of the colour channels. output.lateral_color_correction '
+              'traces each channel at its own (defaults: the centroids of a typical sensor\'s '
+              'colour filters).', 200.0, 2500.0),
     _i('lens.stop_surface', 0, '1',
        'Prescription mode: 0-based index of the surface whose axial point the chief ray '
        'crosses (the aperture stop).', 0, 255),

@@ -132,3 +132,15 @@ def test_vignetting_benchmark_quick(tmp_path):
     assert all(r['gain']['median_ms'] > 0 for r in doc['per_frame'].values())
     assert doc['agreement']['case2']['corner_ri'] == pytest.approx(0.837, abs=0.002)
     assert any('| lens |' in line for line in vignetting.tables(doc))
+
+
+def test_colour_benchmark_quick(tmp_path):
+    from benchmarks import colour
+    doc = colour.run(tmp_path, quick=True)
+    saved = json.loads((tmp_path / 'colour.json').read_text())
+    frame = saved['per_frame']['320x240']
+    assert frame['single']['median_ms'] > 0 and frame['lateral']['median_ms'] > 0
+    assert set(frame['bayer_over_rgb8']) == {'bilinear', 'edge_aware', 'vng'}
+    assert doc['rebuild']['trace_ms'] > 0
+    assert doc['rebuild']['max_rb_separation_px'] == pytest.approx(1.01, abs=0.02)
+    assert any('map per channel' in line for line in colour.tables(doc))
