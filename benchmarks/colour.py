@@ -93,9 +93,10 @@ def frames(rounds: int, reps: int, quiet: float, sizes=FRAME_SIZES) -> dict[str,
         result['others_cores'] = others
         key = f'{width}x{height}'
         out[key] = result
-        log(f"colour: {key}: single {base:.3g} ms, lateral "
-            f"{result['lateral']['median_ms']:.3g} ms (x{result['lateral_over_single']:.2f}), "
-            + ', '.join(f'bayer {m} x{r:.2f}' for m, r in result['bayer_over_rgb8'].items()))
+        bayer_text = ', '.join(f'bayer {m} x{r:.2f}' for m, r in result['bayer_over_rgb8'].items())
+        lateral = result['lateral']['median_ms']
+        log(f'colour: {key}: single {base:.3g} ms, lateral {lateral:.3g} ms '
+            f"(x{result['lateral_over_single']:.2f}), {bayer_text}")
     return out
 
 

@@ -253,9 +253,21 @@ class LateralColor:
         }
 
 
+def channel_model(model: LensModel, channel: ChannelTrace) -> LensModel:
+    """
+    Return the model with a channel's radial map in place of its own (same K, K_new, size).
+
+    :param model: the model.
+    :param channel: one of its :meth:`~mechdeconv_ros.model.LensModel.lateral_color` channels.
+    :return: a model whose remap tables and :meth:`rect_from_raw` are the channel's.
+    """
+    return replace(model, curve=channel.curve, _summary_cache={}, _illumination_cache={},
+                   _lateral_cache={})
+
+
 def wavelengths(values: Mapping[str, Any]) -> tuple[float, float, float]:
     """
-    Return the R, G, B wavelengths (nm).
+    Return the channel wavelengths in nm: R, G, B.
 
     :param values: checked parameter values.
     :return: the three wavelengths.
@@ -329,4 +341,3 @@ def _max_separation(model: LensModel, traces: list[ChannelTrace]
         return math.nan, (math.nan, math.nan)
     k = int(np.nanargmax(separation))
     return float(separation.flat[k]), (float(u.flat[k]), float(v.flat[k]))
-

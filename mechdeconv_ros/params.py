@@ -156,7 +156,7 @@ SCHEMA: tuple[ParamSpec, ...] = (
          -1.0e6, 1.0e6) for p in ASPHERE_POWERS),
     ParamSpec('lens.channel_wavelengths_nm', 'double_array', [610.0, 550.0, 465.0], 'nm',
               'Wavelengths [R, G, B] of the colour channels. output.lateral_color_correction '
-              'traces each channel at its own (defaults: the centroids of a typical sensor\'s '
+              "traces each channel at its own (defaults: the centroids of a typical sensor's "
               'colour filters).', 200.0, 2500.0),
     _i('lens.stop_surface', 0, '1',
        'Prescription mode: 0-based index of the surface whose axial point the chief ray '

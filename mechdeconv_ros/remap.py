@@ -27,13 +27,13 @@ images on first use (no invented depths).
 
 from __future__ import annotations
 
-from dataclasses import replace
 import time
 from typing import Any, Sequence
 
 import cv2
 from mechdeconv_ros.channel_remap import ChannelRemap
 from mechdeconv_ros.illumination import Illumination
+from mechdeconv_ros.lateral_color import channel_model
 from mechdeconv_ros.model import LensModel
 import numpy as np
 import numpy.typing as npt
@@ -226,11 +226,11 @@ class Rectifier:
         # --- lateral colour (issue #20): a map per colour channel, on the same K_new ---
         self.colour: ChannelRemap | None = None
         self.lateral_color_ms = 0.0
-        if lateral if lateral is not None else bool(
-                model.values.get('output.lateral_color_correction', False)):
+        if lateral is None:
+            lateral = bool(model.values.get('output.lateral_color_correction', False))
+        if lateral:
             start = time.perf_counter()
-            maps = [build_float_maps(replace(model, curve=channel.curve, _summary_cache={},
-                                              _illumination_cache={}, _lateral_cache={}))
+            maps = [build_float_maps(channel_model(model, channel))
                     for channel in model.lateral_color().channels]
             self.colour = ChannelRemap(maps, model.width, model.height)
             self.lateral_color_ms = (time.perf_counter() - start) * 1e3

@@ -168,6 +168,7 @@ def test_report_imports_no_benchmark():
                 imported |= {f'benchmarks.{alias.name}' for alias in node.names}
     assert not {name for name in imported if name.startswith('benchmarks')}, imported
 
+
 def test_colour_benchmark_quick(tmp_path):
     from benchmarks import colour
     doc = colour.run(tmp_path, quick=True)

@@ -128,12 +128,13 @@ def _maps(width: int, height: int, strengths: tuple[float, ...]) -> list[tuple[A
     return [(cx + (u - cx) * (1 - k * r2), cy + (v - cy) * (1 - k * r2)) for k in strengths]
 
 
-@pytest.mark.parametrize('interpolation', [cv2.INTER_NEAREST, cv2.INTER_LINEAR, cv2.INTER_CUBIC,
-                                           cv2.INTER_LANCZOS4],
-                         ids=['nearest', 'linear', 'cubic', 'lanczos4'])
-@pytest.mark.parametrize(('order', 'dtype'), [((0, 1, 2), np.uint8), ((2, 1, 0), np.uint16),
-                                             ((0, 1, 2, 1), np.uint8), ((2, 1, 0), np.float32)],
-                         ids=['rgb8', 'bgr16', 'rgba8', 'bgr32f'])
+@pytest.mark.parametrize(
+    'interpolation', [cv2.INTER_NEAREST, cv2.INTER_LINEAR, cv2.INTER_CUBIC, cv2.INTER_LANCZOS4],
+    ids=['nearest', 'linear', 'cubic', 'lanczos4'])
+@pytest.mark.parametrize(
+    ('order', 'dtype'), [((0, 1, 2), np.uint8), ((2, 1, 0), np.uint16),
+                         ((0, 1, 2, 1), np.uint8), ((2, 1, 0), np.float32)],
+    ids=['rgb8', 'bgr16', 'rgba8', 'bgr32f'])
 def test_folded_remap_equals_each_channel_remapped_alone(
         interpolation: int, order: tuple[int, ...], dtype: Any) -> None:
     width, height = 97, 64
@@ -188,7 +189,7 @@ def _render_raw(model: LensModel, curve: Any) -> np.ndarray:
     enters the rendering, only the correction's.
     """
     channel = replace(model, curve=curve, _summary_cache={}, _illumination_cache={},
-                      _lateral_cache={})
+                      _lateral_cache={})     # lateral_color.channel_model, given the curve
     u, v = np.meshgrid(np.arange(model.width, dtype=np.float64),
                        np.arange(model.height, dtype=np.float64))
     rect = channel.rect_from_raw(np.stack([u, v], axis=-1))

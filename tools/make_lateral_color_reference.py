@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import importlib.util
 import json
 import math
 from pathlib import Path
@@ -41,10 +42,23 @@ from typing import Any
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / 'tools'))
 
-from make_optiland_reference import (  # noqa: E402 - after the sys.path fix
-    AIM_TOL_MM, thick_lens_closed_form, trace_chief, versions)
+
+def _reference_tool() -> Any:
+    """Import tools/make_optiland_reference.py (its trace and closed forms)."""
+    path = REPO / 'tools' / 'make_optiland_reference.py'
+    spec = importlib.util.spec_from_file_location('make_optiland_reference', path)
+    module = importlib.util.module_from_spec(spec)
+    assert spec.loader is not None
+    spec.loader.exec_module(module)
+    return module
+
+
+_TOOL = _reference_tool()
+AIM_TOL_MM = _TOOL.AIM_TOL_MM
+thick_lens_closed_form = _TOOL.thick_lens_closed_form
+trace_chief = _TOOL.trace_chief
+versions = _TOOL.versions
 
 DEFAULT_OUTPUT = REPO / 'test' / 'data' / 'lateral_color_reference.json'
 #: Channel wavelengths [R, G, B] and the focus wavelength, nm (the parameters' defaults).
