@@ -134,6 +134,7 @@ def format_report(report: dict[str, Any]) -> str:
         f"{_px(report['fit_rms_px'])})",
         _field_line(report),
     ]
+    lines += _glass_and_sensor_lines(report)
     ri = report.get('relative_illumination')
     if ri:
         line = f"relative illumination: {ri['corner_ri']:.3f} at the raw corner"
@@ -146,6 +147,22 @@ def format_report(report: dict[str, Any]) -> str:
         lines.append(line)
     lines += [f'warning: {w}' for w in report['warnings']]
     return '\n'.join(lines)
+
+
+def _glass_and_sensor_lines(report: dict[str, Any]) -> list[str]:
+    """Return the glass line (when a glass is named) and the sensor line (when defocused)."""
+    lines = []
+    surfaces = report.get('surfaces') or []
+    named = [(i, s) for i, s in enumerate(surfaces) if s['glass']]
+    if named:
+        lines.append(f"glass at {report['wavelength_nm']:g} nm: " + ', '.join(
+            f"surface {i} {s['glass']} n = {s['refractive_index']:.6f}" for i, s in named))
+    sensor = report.get('sensor_plane')
+    if sensor and sensor['image_distance_mm'] is not None:
+        lines.append(f"sensor: {sensor['image_distance_mm']:.5g} mm behind the last vertex, "
+                     f"{sensor['defocus_mm']:+.4g} mm from the image of the scene: blur circle "
+                     f"{sensor['blur_diameter_um']:.3g} um ({sensor['blur_diameter_px']:.3g} px)")
+    return lines
 
 
 def _px(value: float | None) -> str:

@@ -324,7 +324,8 @@ def relative_illumination(model: Any, *, samples: int = RI_SAMPLES,
     radius, surface = stop_of(values)
     distance = float(values['scene.distance_mm'])
     distance = math.inf if distance == 0.0 else distance
-    sensor_z, _ = image_plane(model.prescription, distance)
+    # The sensor's plane (lens.image_distance_mm may move it off the paraxial image plane).
+    sensor_z, _ = model.source.image_plane(distance)
     system = backward_system(model.prescription, radius, surface, sensor_z,
                              math.isinf(distance))
     px, py = model.pixel_mm

@@ -11,6 +11,13 @@ prescription mode builds the surfaces of ``lens.surfaces.*`` (conic and even asp
 one per surface or none for all 0) with the stop on surface ``lens.stop_surface``.
 Conventions: docs/design.md section 1.
 
+Glass by name (docs/design.md section 2.11): ``lens.glass`` (thick lens) and
+``lens.surfaces.glass`` (one name per surface) become refractive indices at
+``lens.wavelength_nm`` (:func:`with_glass_indices`) before the lens is built; the resolved
+values carry the indices and no names, so tolerances perturb the indices. A thick lens given by
+``lens.focal_length_mm`` and a glass is designed at the d line (its radii from n_d) and traced
+at the wavelength, so its focal length follows the glass's dispersion.
+
 Tolerances: each lens quantity varied by its 1-sigma (``lens.tolerance.*``) is named as a
 parameter, ``lens.r1_mm`` or an array element ``lens.surfaces.radius_mm[2]``; every surface of
 a prescription gets the tolerance class of the thick-lens parameters.
@@ -21,6 +28,7 @@ from __future__ import annotations
 import math
 from typing import Any, Mapping
 
+from mechdeconv_ros import glass
 from mechdeconv_ros.model_base import is_prescription_mode, ModelError
 from mechdeconv_ros.optics import biconvex_for_focal_length, thick_lens
 from mechdeconv_ros.params import ASPHERE_POWERS
@@ -36,6 +44,7 @@ def make_prescription(values: Mapping[str, Any]) -> Prescription:
     :return: the thick lens (two surfaces, stop at ``z_H - m_a``) or the prescription.
     :raises ModelError: when the description is not a lens that focuses.
     """
+    values = with_glass_indices(values)
     if is_prescription_mode(values):
         return _surface_prescription(values)
     n = float(values['lens.refractive_index'])
@@ -57,6 +66,86 @@ def make_prescription(values: Mapping[str, Any]) -> Prescription:
     except ValueError as err:
         raise ModelError('lens.r1_mm', f'r1 = {r1:g} mm, r2 = {r2:g} mm, t = {t:g} mm: {err}'
                          ) from None
+
+
+def _glass_index(name: str, wavelength_nm: float, parameter: str, where: str) -> float:
+    """Return a named glass's index at the wavelength, or refuse naming the parameter."""
+    try:
+        found = glass.lookup(name)
+    except glass.GlassError as err:
+        raise ModelError(parameter, f'{where}{err}') from None
+    try:
+        return float(found.index(wavelength_nm))
+    except glass.GlassError as err:
+        raise ModelError('lens.wavelength_nm', f'{where}{err}') from None
+
+
+def with_glass_indices(values: Mapping[str, Any]) -> Mapping[str, Any]:
+    """
+    Return the values with every named glass replaced by its index at ``lens.wavelength_nm``.
+
+    Thick-lens mode: ``lens.glass`` sets ``lens.refractive_index`` (and, with
+    ``lens.focal_length_mm``, the radii of the biconvex lens designed at the d line, which
+    become ``lens.r1_mm``/``lens.r2_mm`` with the focal length then 0). Prescription mode:
+    each non-empty ``lens.surfaces.glass`` name other than AIR sets that surface's
+    ``lens.surfaces.refractive_index`` (which may be empty: '' and AIR are 1.0 then). The
+    names are cleared, so resolving twice changes nothing. Values without names are returned
+    as they are.
+
+    :param values: checked parameter values.
+    :return: the values (a new dict when a glass was resolved).
+    :raises ModelError: naming ``lens.glass`` or ``lens.surfaces.glass`` (and the surface) for
+        an unknown or ambiguous glass or a misplaced name, ``lens.wavelength_nm`` for a
+        wavelength outside the glass's formula range.
+    """
+    thick = str(values.get('lens.glass', '') or '').strip()
+    names = [str(n) for n in values.get('lens.surfaces.glass', []) or []]
+    if not thick and not names:
+        return values
+    prescription_mode = is_prescription_mode(values)
+    if thick and prescription_mode:
+        raise ModelError('lens.glass', f"{thick!r} names the thick lens's glass, but "
+                                       'lens.surfaces.* describe the lens: name the glass of '
+                                       'each surface in lens.surfaces.glass')
+    if names and not prescription_mode:
+        raise ModelError('lens.surfaces.glass', 'names the glasses of a prescription, but '
+                                                'lens.surfaces.radius_mm is empty (thick-lens '
+                                                'mode): use lens.glass')
+    wave = float(values['lens.wavelength_nm'])
+    out = {k: (list(v) if isinstance(v, list) else v) for k, v in values.items()}
+    if thick:
+        out['lens.glass'] = ''
+        out['lens.refractive_index'] = _glass_index(thick, wave, 'lens.glass', '')
+        focal = float(values['lens.focal_length_mm'])
+        if focal > 0.0:
+            n_d = _glass_index(thick, glass.LINES_NM['d'], 'lens.glass', '')
+            try:
+                radius = biconvex_for_focal_length(focal, n_d, float(values['lens.thickness_mm']))
+            except ValueError as err:
+                raise ModelError('lens.focal_length_mm', f'{thick} (n_d = {n_d:.6g}): {err}'
+                                 ) from None
+            out['lens.r1_mm'], out['lens.r2_mm'] = radius, -radius
+            out['lens.focal_length_mm'] = 0.0
+        return out
+    count = len(values['lens.surfaces.radius_mm'])
+    given = [float(n) for n in values['lens.surfaces.refractive_index']]
+    if len(names) != count:
+        raise ModelError('lens.surfaces.glass', f'has {len(names)} names but '
+                                                f'lens.surfaces.radius_mm has {count}: give one '
+                                                "per surface ('' = its refractive_index), or "
+                                                'none')
+    if given and len(given) != count:
+        return values   # _surface_prescription refuses the index array's length
+    indices = []
+    for i, name in enumerate(names):
+        text = name.strip()
+        if not text or text.upper() == 'AIR':
+            indices.append(given[i] if given else 1.0)
+        else:
+            indices.append(_glass_index(text, wave, 'lens.surfaces.glass', f'surface {i}: '))
+    out['lens.surfaces.refractive_index'] = indices
+    out['lens.surfaces.glass'] = []
+    return out
 
 
 def _surface_prescription(values: Mapping[str, Any]) -> Prescription:

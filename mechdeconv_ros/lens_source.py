@@ -42,11 +42,16 @@ from typing import Any, Mapping
 
 from mechdeconv_ros import illumination, refusals
 from mechdeconv_ros.illumination import Illumination
-from mechdeconv_ros.lens_params import make_prescription, tolerance_keys, with_overrides
+from mechdeconv_ros.lens_params import (
+    make_prescription, tolerance_keys, with_glass_indices, with_overrides)
 from mechdeconv_ros.model_base import (
     FloatArray, is_prescription_mode, lens_param, ModelError, stop_param)
-from mechdeconv_ros.prescription import image_plane, Paraxial, paraxial, Prescription, Surface
+from mechdeconv_ros.prescription import Paraxial, paraxial, Prescription, Surface
 from mechdeconv_ros.raytrace import trace_field
+from mechdeconv_ros.sensor_plane import blur_diameter_mm, sensor_plane, SensorPlane
+
+#: A sensor off the image plane is noted in the warnings when its blur circle is wider (px).
+DEFOCUS_WARNING_PX = 2.0
 
 #: Everything a new source may need, importable from here.
 __all__ = [
@@ -158,6 +163,15 @@ class LensSource(abc.ABC):
         """Return (nominal values, 1-sigmas) by parameter name, or None: they do not apply."""
         return None
 
+    def defocus(self, distance_mm: float) -> dict[str, float] | None:
+        """
+        Return how far the sensor is from the image of the scene, or None.
+
+        :param distance_mm: scene distance from H.
+        :return: None by default: the sensor is on the image of the scene.
+        """
+        return None
+
     def perturbed(self, scalars: Mapping[str, float]) -> LensSource:
         """
         Return the source with some parameters changed (tolerance propagation).
@@ -195,13 +209,16 @@ class TracedSource(LensSource):
             subclass's: a moving or per-wavelength prescription).
         :raises ModelError: when the values describe no lens that focuses.
         """
+        # Named glasses become indices at lens.wavelength_nm (lens_params.with_glass_indices):
+        # the source keeps the resolved values, so perturbing an index perturbs the glass's.
+        values = with_glass_indices(values)
         self.values = values
         self.lens_parameter = lens_param(values)
         self.stop_parameter = stop_param(values)
         self._prescription = (make_prescription(values) if prescription is None
                               else prescription)
         self._paraxial: Paraxial | None = None
-        self._planes: dict[float, tuple[float, float]] = {}
+        self._planes: dict[float, SensorPlane] = {}
 
     @property
     def prescription(self) -> Prescription:
@@ -231,11 +248,46 @@ class TracedSource(LensSource):
         para = self.paraxial()
         return FirstOrder(para.efl_mm, para.front_principal_z_mm, para.rear_principal_z_mm)
 
-    def image_plane(self, distance_mm: float) -> tuple[float, float]:
-        """Return the paraxial image plane: ``n'/v = Phi - n_0/l`` (module raytrace)."""
+    def sensor_plane(self, distance_mm: float) -> SensorPlane:
+        """
+        Return the sensor plane: the paraxial image plane or ``lens.image_distance_mm``.
+
+        :param distance_mm: scene distance from H.
+        :return: the plane (:mod:`mechdeconv_ros.sensor_plane`), with the image plane.
+        :raises ValueError: when the scene forms no real image.
+        :raises ModelError: naming ``lens.image_distance_mm`` for a sensor in the lens.
+        """
         if distance_mm not in self._planes:
-            self._planes[distance_mm] = image_plane(self._prescription, distance_mm)
+            self._planes[distance_mm] = sensor_plane(
+                self._prescription, distance_mm, self.first_order().front_principal_z_mm,
+                float(self.values.get('lens.image_distance_mm', 0.0)),
+                float(self.values['lens.aperture_diameter_mm']))
         return self._planes[distance_mm]
+
+    def image_plane(self, distance_mm: float) -> tuple[float, float]:
+        """
+        Return the sensor's z and the raw pinhole's image distance there.
+
+        On the paraxial image plane (``lens.image_distance_mm`` = 0): ``n'/v = Phi - n_0/l``
+        (module prescription); else the sensor ``lens.image_distance_mm`` behind the last vertex
+        and the paraxial chief ray's scale there (:mod:`mechdeconv_ros.sensor_plane`).
+        """
+        plane = self.sensor_plane(distance_mm)
+        return plane.z_mm, plane.v_mm
+
+    def defocus(self, distance_mm: float) -> dict[str, float]:
+        """
+        Return how far the sensor is from the image of the scene, and its blur circle.
+
+        :param distance_mm: scene distance from H.
+        :return: ``{'defocus_mm': dz, 'blur_diameter_mm': B, 'paraxial_image_distance_mm': v}``.
+        """
+        plane = self.sensor_plane(distance_mm)
+        blur = blur_diameter_mm(self._prescription, distance_mm,
+                                self.first_order().front_principal_z_mm, plane.z_mm,
+                                float(self.values['lens.aperture_diameter_mm']))
+        return {'defocus_mm': plane.defocus_mm, 'blur_diameter_mm': blur,
+                'paraxial_image_distance_mm': plane.image_v_mm}
 
     def real_heights(self, field_angle_rad: FloatArray, distance_mm: float,
                      guide: Guide | None = None) -> tuple[FloatArray, FloatArray]:
@@ -251,8 +303,20 @@ class TracedSource(LensSource):
 
     def check_physical(self, distance_mm: float, sensor_z_mm: float) -> list[str]:
         """Apply the rules on surfaces (:func:`mechdeconv_ros.refusals.check_surfaces`)."""
-        return refusals.check_surfaces(self.values, self._prescription, self.paraxial(),
-                                       distance_mm, sensor_z_mm)
+        # The lens rules hold for the paraxial image plane of the scene (a lens that images
+        # the scene inside its glass stays refused however far the sensor stands).
+        image_z = self.sensor_plane(distance_mm).image_z_mm
+        warnings = refusals.check_surfaces(self.values, self._prescription, self.paraxial(),
+                                           distance_mm, image_z)
+        blur = self.defocus(distance_mm)['blur_diameter_mm']
+        pixel = min(float(self.values['sensor.pixel_size_x_um']),
+                    float(self.values['sensor.pixel_size_y_um'])) * 1e-3
+        if blur > DEFOCUS_WARNING_PX * pixel:
+            warnings.append(
+                f'lens.image_distance_mm: the sensor is '
+                f'{self.sensor_plane(distance_mm).defocus_mm:+.4g} mm from the image of the '
+                f'scene: blur circle {blur * 1e3:.3g} um ({blur / pixel:.3g} px) across')
+        return warnings
 
     def tolerances(self) -> tuple[dict[str, float], dict[str, float]]:
         """Return the lens parameters with their ``lens.tolerance.*`` sigmas."""
@@ -288,8 +352,14 @@ def source_from_values(values: Mapping[str, Any]) -> LensSource:
     :param values: checked parameter values.
     :return: a :class:`PrescriptionSource` when ``lens.surfaces.radius_mm`` is given, else a
         :class:`ThickLensSource`.
-    :raises ModelError: when the values describe no lens that focuses.
+    :raises ModelError: when the values describe no lens that focuses, or a datasheet lens
+        (``lens.datasheet.*``: :class:`mechdeconv_ros.datasheet.TableSource`, which
+        :func:`~mechdeconv_ros.model.build_model` picks).
     """
+    if len(values.get('lens.datasheet.field_angle_deg', ())) > 0:
+        raise ModelError('lens.datasheet.field_angle_deg',
+                         'describes a datasheet lens: build it with '
+                         'mechdeconv_ros.datasheet.TableSource (build_model does)')
     if is_prescription_mode(values):
         return PrescriptionSource(values)
     return ThickLensSource(values)

@@ -151,7 +151,8 @@ def plain(value: Any) -> Any:
 
 def check_length(spec: ParamSpec, value: Any) -> None:
     """Refuse a ``lens.surfaces.*`` array longer than :data:`MAX_SURFACES` (before reading it)."""
-    if spec.type == 'double_array' and hasattr(value, '__len__') and len(value) > MAX_SURFACES:
+    if spec.type in ('double_array', 'string_array') and hasattr(value, '__len__') \
+            and len(value) > MAX_SURFACES:
         raise ValueError(f'{spec.name}: {len(value)} values, more than the {MAX_SURFACES} '
                          'surfaces a prescription may have')
 

@@ -50,6 +50,7 @@ import math
 from typing import Any, Mapping
 
 from mechdeconv_ros import lateral_color, refusals
+from mechdeconv_ros.datasheet import is_table_mode, TableSource
 from mechdeconv_ros.equivalent import (
     boundary_points, choose_equivalent, EQUIVALENT_MAX_ERROR_PX, EquivalentFit, fit_equivalent)
 from mechdeconv_ros.illumination import Illumination
@@ -348,7 +349,8 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
         name = str(err).split(':', 1)[0].split('[', 1)[0].strip(" '")
         raise ModelError(name, str(err).split(':', 1)[-1].strip()) from None
     if source is None:
-        source = source_from_values(vals)
+        # A datasheet table, else the traced lens the lens.* values describe.
+        source = TableSource(vals) if is_table_mode(vals) else source_from_values(vals)
     para = source.first_order()
     f = para.efl_mm
     if f <= 0.0:

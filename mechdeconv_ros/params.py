@@ -55,9 +55,9 @@ class ParamSpec:
     """
     One parameter: name, type, default, unit, range and what it means.
 
-    ``type`` is one of ``'double'``, ``'integer'``, ``'string'``, ``'bool'`` and
-    ``'double_array'``. ``minimum``/``maximum`` are inclusive bounds (``None``: unbounded);
-    for arrays they bound every element.
+    ``type`` is one of ``'double'``, ``'integer'``, ``'string'``, ``'bool'``,
+    ``'double_array'`` and ``'string_array'``. ``minimum``/``maximum`` are inclusive bounds
+    (``None``: unbounded); for arrays they bound every element.
     """
 
     name: str
@@ -91,6 +91,10 @@ def _i(name: str, default: int, unit: str, description: str,
     return ParamSpec(name, 'integer', int(default), unit, description, minimum, maximum)
 
 
+def _sa(name: str, description: str) -> ParamSpec:
+    return ParamSpec(name, 'string_array', [], '', description)
+
+
 def _a(name: str, unit: str, description: str,
        minimum: float | None = None, maximum: float | None = None) -> ParamSpec:
     return ParamSpec(name, 'double_array', [], unit, description, minimum, maximum)
@@ -107,6 +111,19 @@ SCHEMA: tuple[ParamSpec, ...] = (
     # --- lens: the paper's thick lens (two spherical surfaces) ---
     _d('lens.refractive_index', 1.5168, '1',
        'Refractive index n of the lens glass (d-line); the paper uses BK7, 1.5168.', 1.0, 4.0),
+    ParamSpec('lens.glass', 'string', '', '',
+              "Thick-lens mode: lens glass by name ('' = off); its index at "
+              'lens.wavelength_nm replaces lens.refractive_index. A catalog glass (N-BK7, '
+              'SCHOTT:N-BK7, S-LAH66, H-ZF52, TAFD25) or MODEL:nd:vd. With '
+              'lens.focal_length_mm the radii are designed at the d line (587.56 nm), so f '
+              'changes with the wavelength.'),
+    _d('lens.wavelength_nm', 587.56, 'nm',
+       'Wavelength the lens is traced at: the index of every named glass (lens.glass, '
+       'lens.surfaces.glass) is its catalog formula there.', 350.0, 2500.0),
+    _d('lens.image_distance_mm', 0.0, 'mm',
+       'Distance from the last lens vertex to the sensor; 0 = the paraxial image plane of '
+       'scene.distance_mm (in focus). Another value defocuses: rays land where they meet '
+       'that plane.', 0.0, 1.0e4),
     _d('lens.r1_mm', 4.0, 'mm',
        'Radius of the front surface; > 0 when its centre of curvature is on the image side, '
        '0 = flat.', -1.0e4, 1.0e4),
@@ -123,7 +140,8 @@ SCHEMA: tuple[ParamSpec, ...] = (
        -1.0e3, 1.0e3),
     _d('lens.focal_length_mm', 0.0, 'mm',
        'Nominal focal length (datasheet); > 0 replaces r1/r2 by a symmetric biconvex lens of '
-       'this focal length, index n and thickness t. 0 = derive f from r1, r2, t, n.',
+       'this focal length, index n and thickness t. 0 = derive f from r1, r2, t, n. Datasheet '
+       'mode: the effective focal length (required).',
        0.0, 1.0e4),
     _d('lens.exposure_constant_q', 2.0, '1',
        'Exposure constant q of the f-number n_f = sqrt(2/q) f / d_a (eq. 16-18).', 1.0e-3, 1.0e3),
@@ -145,6 +163,10 @@ SCHEMA: tuple[ParamSpec, ...] = (
        'the sensor sits at the paraxial image plane).', 0.0, 1.0e4),
     _a('lens.surfaces.refractive_index', '1',
        'Prescription mode: refractive index after each surface (1.0 = air).', 1.0, 4.0),
+    _sa('lens.surfaces.glass',
+        'Prescription mode: glass after each surface by name; its index at '
+        "lens.wavelength_nm (N-BK7, OHARA:S-LAH66, MODEL:nd:vd); '' or AIR = that surface's "
+        'lens.surfaces.refractive_index (1.0 when that array is empty); empty = none.'),
     _a('lens.surfaces.semi_diameter_mm', 'mm',
        'Prescription mode: clear semi-diameter of each surface (0 = unlimited); empty = all '
        'unlimited.', 0.0, 1.0e4),
@@ -158,6 +180,17 @@ SCHEMA: tuple[ParamSpec, ...] = (
               'Wavelengths [R, G, B] of the colour channels. output.lateral_color_correction '
               "traces each channel at its own (defaults: the centroids of a typical sensor's "
               'colour filters).', 200.0, 2500.0),
+    # --- lens: datasheet table (non-empty arrays select datasheet mode) ---
+    _a('lens.datasheet.field_angle_deg', 'deg',
+       'Datasheet mode: field angles of the image height table; strictly increasing from the '
+       'axis (scene at infinity), with lens.focal_length_mm as the effective focal length. '
+       'Non-empty replaces the thick lens.', 0.0, 179.0),
+    _a('lens.datasheet.image_height_mm', 'mm',
+       'Datasheet mode: real image height at each field angle; increasing (0 at 0 deg).',
+       0.0, 1.0e3),
+    _a('lens.datasheet.relative_illumination', '1',
+       'Datasheet mode: relative illumination at each field angle; 1 on the axis, empty = '
+       'unknown (no vignetting correction).', 0.0, 1.5),
     _i('lens.stop_surface', 0, '1',
        'Prescription mode: 0-based index of the surface whose axial point the chief ray '
        'crosses (the aperture stop).', 0, 255),
@@ -269,7 +302,8 @@ def coerce(spec: ParamSpec, value: Any) -> ParamValue:
 
     :param spec: the parameter's spec.
     :param value: the proposed value.
-    :return: the value as ``float``, ``int``, ``str``, ``bool`` or ``list[float]``.
+    :return: the value as ``float``, ``int``, ``str``, ``bool``, ``list[float]`` or
+        ``list[str]``.
     :raises ValueError: with a message naming the parameter, when the type, a bound or a choice
         is violated or a number is not finite.
     """
@@ -284,6 +318,10 @@ def coerce(spec: ParamSpec, value: Any) -> ParamValue:
         if spec.choices and value not in spec.choices:
             raise ValueError(f'{name}: expected one of {", ".join(spec.choices)}, got {value!r}')
         return value
+    if spec.type == 'string_array':
+        if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) for v in value):
+            raise ValueError(f'{name}: expected a list of strings, got {value!r}')
+        return [str(v) for v in value]
     if spec.type == 'double_array':
         if not isinstance(value, (list, tuple)) and not hasattr(value, 'tolist'):
             raise ValueError(f'{name}: expected a list of numbers, got {value!r}')
@@ -404,5 +442,7 @@ def to_params_yaml(values: Mapping[str, Any], node_name: str = '/**',
         for part in parents:
             node = node.setdefault(part, {})
         value = values[name]
-        node[leaf] = [float(v) for v in value] if isinstance(value, list) else value
+        if isinstance(value, list):
+            value = [v if isinstance(v, str) else float(v) for v in value]
+        node[leaf] = value
     return yaml.safe_dump({node_name: {'ros__parameters': tree}}, sort_keys=False)

@@ -57,6 +57,10 @@ def _sag(surface: Surface, height_mm: float) -> float:
     return out
 
 
+#: The sagitta of a surface at a height, clamped at its rim (public for the sensor plane).
+sag_mm = _sag
+
+
 def _shape(surface: Surface) -> str:
     """Name a surface's shape for a reason: 'a spherical surface of radius 4 mm'."""
     if is_spherical(surface):

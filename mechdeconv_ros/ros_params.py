@@ -73,7 +73,8 @@ def declare_schema(node: Node, specs: Iterable[ParamSpec],
     """
     Declare schema parameters with their descriptors and return their checked start-up values.
 
-    Double arrays are declared statically typed, since rclpy cannot infer a type from ``[]``
+    Double and string arrays are declared statically typed, since rclpy cannot infer a type
+    from ``[]``
     (it would make a BYTE_ARRAY), and set to ``[]`` when no override gave them a value.
 
     :param node: the node to declare on.
@@ -89,6 +90,8 @@ def declare_schema(node: Node, specs: Iterable[ParamSpec],
         default = defaults.get(spec.name, spec.default)
         if spec.type == 'double_array' and not default:
             default = Parameter.Type.DOUBLE_ARRAY
+        elif spec.type == 'string_array' and not default:
+            default = Parameter.Type.STRING_ARRAY
         try:
             node.declare_parameter(spec.name, default, descriptor_for(spec))
         except InvalidParameterTypeException as err:
@@ -97,8 +100,10 @@ def declare_schema(node: Node, specs: Iterable[ParamSpec],
             errors.append(f'{spec.name}: {err}')
     if errors:
         raise ValueError('invalid start-up parameters:\n  ' + '\n  '.join(errors))
-    unset = [Parameter(spec.name, Parameter.Type.DOUBLE_ARRAY, [])
-             for spec in specs if spec.type == 'double_array'
+    array_types = {'double_array': Parameter.Type.DOUBLE_ARRAY,
+                   'string_array': Parameter.Type.STRING_ARRAY}
+    unset = [Parameter(spec.name, array_types[spec.type], [])
+             for spec in specs if spec.type in array_types
              and node.get_parameter_or(spec.name).type_ == Parameter.Type.NOT_SET]
     if unset:
         node.set_parameters(unset)

@@ -91,6 +91,9 @@ def summarize(model: Any) -> dict[str, Any]:
     first = source.first_order()
     return {
         'mode': source.mode,
+        'wavelength_nm': float(vals['lens.wavelength_nm']),
+        'surfaces': _surfaces(model),
+        'sensor_plane': _sensor(model, distance),
         'focal_length_mm': f,
         'focal_length_sigma_mm': sigma_f,
         'image_distance_mm': model.image_distance_mm,
@@ -125,6 +128,52 @@ def summarize(model: Any) -> dict[str, Any]:
         'corner_sigma_px': corner_sigma,
         'warnings': warnings,
     }
+
+
+def _surfaces(model: Any) -> list[dict[str, Any]] | None:
+    """
+    Return each surface's medium after it: the glass named for it and the traced index.
+
+    :param model: the model.
+    :return: ``[{'glass': 'N-BK7' or None, 'refractive_index': n}, ...]``; None without
+        surfaces (a datasheet lens).
+    """
+    prescription = model.source.prescription
+    if prescription is None:
+        return None
+    vals = model.values
+    names = [str(n).strip() for n in vals.get('lens.surfaces.glass', [])]
+    if not names and str(vals.get('lens.glass', '')).strip():
+        # The thick lens: its glass fills the gap between the two surfaces (and the stop
+        # plane inside it, when there is one).
+        names = [str(vals['lens.glass']).strip() if s.refractive_index != 1.0 else ''
+                 for s in prescription.surfaces]
+    return [{'glass': (names[i] if i < len(names) and names[i] else None),
+             'refractive_index': float(surface.refractive_index)}
+            for i, surface in enumerate(prescription.surfaces)]
+
+
+def _sensor(model: Any, distance: float) -> dict[str, Any] | None:
+    """
+    Return where the sensor sits against the image of the scene (``lens.image_distance_mm``).
+
+    :param model: the model.
+    :param distance: scene distance from H.
+    :return: ``image_distance_mm`` (the parameter, None = on the paraxial image),
+        ``defocus_mm`` (dz from the paraxial image of the scene), the blur circle's diameter in
+        um and px (x pitch) and the paraxial image distance; None when the source has no
+        sensor plane of its own.
+    """
+    defocus = model.source.defocus(distance)
+    if defocus is None:
+        return None
+    blur = float(defocus['blur_diameter_mm'])
+    setting = float(model.values.get('lens.image_distance_mm', 0.0))
+    return {'image_distance_mm': setting if setting > 0.0 else None,
+            'defocus_mm': float(defocus['defocus_mm']),
+            'blur_diameter_um': blur * 1e3,
+            'blur_diameter_px': blur / model.pixel_mm[0],
+            'paraxial_image_distance_mm': float(defocus['paraxial_image_distance_mm'])}
 
 
 #: Samples of the field traced beyond the sensor, to the lens's limit (for the report).

@@ -17,7 +17,8 @@ def test_schema_is_consistent():
     names = [spec.name for spec in params.SCHEMA]
     assert len(names) == len(set(names))
     for spec in params.SCHEMA:
-        assert spec.type in ('double', 'integer', 'string', 'bool', 'double_array')
+        assert spec.type in ('double', 'integer', 'string', 'bool', 'double_array',
+                             'string_array')
         assert spec.description.endswith('.'), spec.name
         # Every default passes its own checks.
         assert params.coerce(spec, spec.default) == spec.default
@@ -40,6 +41,10 @@ def test_issue_contract_names_are_declared():
     # Issue 11: aspheric surfaces.
     contract += ['lens.surfaces.conic', 'output.projection'] + [
         f'lens.surfaces.asphere_a{p}' for p in (4, 6, 8, 10, 12, 14, 16)]
+    # Issue 18: glass by name, the sensor's distance, datasheet lenses.
+    contract += ['lens.glass', 'lens.wavelength_nm', 'lens.surfaces.glass',
+                 'lens.image_distance_mm', 'lens.datasheet.field_angle_deg',
+                 'lens.datasheet.image_height_mm', 'lens.datasheet.relative_illumination']
     assert set(contract) <= set(params.SPECS)
     assert set(contract) == set(params.MODEL_PARAMS)
 
@@ -50,7 +55,9 @@ def test_issue_contract_names_are_declared():
     ('output.interpolation', 'cubic', 'cubic'),
     ('lens.surfaces.radius_mm', (1, 2.5), [1.0, 2.5]),
     ('lazy_subscription', False, False),
-], ids=['int-for-double', 'whole-float-for-int', 'choice', 'tuple-array', 'bool'])
+    ('lens.surfaces.glass', ('N-BK7', ''), ['N-BK7', '']),
+], ids=['int-for-double', 'whole-float-for-int', 'choice', 'tuple-array', 'bool',
+        'string-array'])
 def test_coerce_accepts(name, value, expected):
     assert params.coerce(params.SPECS[name], value) == expected
 
@@ -64,8 +71,10 @@ def test_coerce_accepts(name, value, expected):
     ('output.interpolation', 'area', 'one of nearest, linear, cubic, lanczos4'),
     ('lens.surfaces.radius_mm', [1.0, math.nan], 'lens.surfaces.radius_mm[1]'),
     ('lazy_subscription', 1, 'true or false'),
+    ('lens.surfaces.glass', ['N-BK7', 1.5], 'list of strings'),
+    ('lens.surfaces.glass', 'N-BK7', 'list of strings'),
 ], ids=['inf', 'string', 'bool-for-double', 'below-range', 'fraction', 'choice',
-        'nan-in-array', 'int-for-bool'])
+        'nan-in-array', 'int-for-bool', 'number-in-string-array', 'string-for-array'])
 def test_coerce_refuses_with_the_name(name, value, words):
     with pytest.raises(ValueError) as info:
         params.coerce(params.SPECS[name], value)

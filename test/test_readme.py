@@ -60,8 +60,9 @@ def test_parameters_page_is_generated_from_the_schema() -> None:
 def test_parameters_table_has_one_row_per_parameter(readme: str) -> None:
     gen = load_generator()
     rows = gen.table_in(readme).splitlines()[2:]
-    names = [re.match(r'\| `([^`]+)` \|', row).group(1) for row in rows]
-    assert names == [spec.name for spec in SCHEMA]
+    # The asphere terms a4 ... a16 share one row (`lens.surfaces.asphere_a4` ... `_a16`).
+    names = [re.match(r'\| `([^`]+)`( \.\.\. `_a16`)? \|', row).group(1) for row in rows]
+    assert names == [spec.name for spec in SCHEMA if spec.name not in gen.ASPHERE_FOLDED[1:]]
 
 
 def test_generator_refuses_a_readme_without_markers() -> None:

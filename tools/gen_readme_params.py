@@ -24,10 +24,13 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
-from mechdeconv_ros.params import ParamSpec, SCHEMA  # noqa: E402 - after the sys.path fix
+from mechdeconv_ros.params import (  # noqa: E402 - after the sys.path fix
+    ASPHERE_POWERS, ParamSpec, SCHEMA)
 
 START = '<!-- params:start -->'
 END = '<!-- params:end -->'
+#: The even asphere terms share one row of the README's table (docs/parameters.md lists each).
+ASPHERE_FOLDED = tuple(f'lens.surfaces.asphere_a{p}' for p in ASPHERE_POWERS)
 #: The generated page with the whole descriptions.
 PARAMETERS_PAGE = REPO / 'docs' / 'parameters.md'
 
@@ -56,7 +59,9 @@ def format_default(spec: ParamSpec) -> str:
         return text if any(c in text for c in '.e') else text + '.0'
     if spec.type == 'double_array':
         return '[' + ', '.join(_number(float(v)) for v in value) + ']'
-    return str(value)
+    if spec.type == 'string_array':
+        return '[' + ', '.join(repr(str(v)) for v in value) + ']'
+    return str(value) or "''"
 
 
 def format_range(spec: ParamSpec) -> str:
@@ -122,11 +127,18 @@ def params_table(full: bool = False) -> str:
                 format_range(spec), unit,
                 spec.description + (' Read-only.' if spec.read_only else ''))
         else:
+            if spec.name in ASPHERE_FOLDED[1:]:
+                continue    # one README row for the asphere terms (the README's size limit)
             span = format_range(spec)
             if unit not in ('-', '1') and span != '-':
                 span += f' {unit}'
-            cells = (f'`{spec.name}`', f'`{format_default(spec)}`', span,
-                     short_description(spec))
+            name, text = f'`{spec.name}`', short_description(spec)
+            if spec.name == ASPHERE_FOLDED[0]:
+                name = f'`{spec.name}` ... `_a{ASPHERE_POWERS[-1]}`'
+                span = format_range(spec)
+                text = (f'Prescription mode: even asphere terms a4 r^4 ... '
+                        f'a{ASPHERE_POWERS[-1]} r^{ASPHERE_POWERS[-1]} of each surface.')
+            cells = (name, f'`{format_default(spec)}`', span, text)
         rows.append('| ' + ' | '.join(_cell(c) for c in cells) + ' |')
     return '\n'.join(rows)
 
