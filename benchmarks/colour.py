@@ -28,7 +28,6 @@ from benchmarks.common import bench_main, interleave, log, RESULTS, Variant
 from benchmarks.report import machine_info, markdown_table, write_json
 from benchmarks.speed import case2_values
 from mechdeconv_ros.debayer import Demosaicer
-from mechdeconv_ros.glass import refractive_index
 from mechdeconv_ros.model import build_model
 from mechdeconv_ros.params import DEBAYER_METHODS
 from mechdeconv_ros.remap import Rectifier
@@ -43,11 +42,9 @@ BAYER_RATIO_TARGET = 1.5
 
 
 def glass_values() -> dict[str, Any]:
-    """Return Case 2 in N-BK7 (its index at the focus wavelength), size from the frames."""
+    """Return Case 2 in N-BK7 focused at 550 nm, the sensor size from the frames."""
     values = case2_values()
-    values['lens.glass'] = GLASS
-    values['lens.refractive_index'] = refractive_index(
-        GLASS, float(values.get('lens.wavelength_nm', 550.0)))
+    values.update({'lens.glass': GLASS, 'lens.wavelength_nm': 550.0})
     return values
 
 

@@ -177,5 +177,5 @@ def test_colour_benchmark_quick(tmp_path):
     assert frame['single']['median_ms'] > 0 and frame['lateral']['median_ms'] > 0
     assert set(frame['bayer_over_rgb8']) == {'bilinear', 'edge_aware', 'vng'}
     assert doc['rebuild']['trace_ms'] > 0
-    assert doc['rebuild']['max_rb_separation_px'] == pytest.approx(1.01, abs=0.02)
+    assert doc['rebuild']['max_rb_separation_px'] == pytest.approx(4.11, abs=0.02)   # at 1080p
     assert any('map per channel' in line for line in colour.tables(doc))

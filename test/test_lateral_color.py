@@ -24,9 +24,8 @@ import cv2
 from mechdeconv_ros import channel_remap, lateral_color
 from mechdeconv_ros.channel_remap import ChannelRemap
 from mechdeconv_ros.cli import main
-from mechdeconv_ros.glass import refractive_index
 from mechdeconv_ros.model import build_model, LensModel, ModelError
-from mechdeconv_ros.params import load_params_file, SPECS
+from mechdeconv_ros.params import load_params_file, to_params_yaml
 from mechdeconv_ros.remap import Rectifier
 import numpy as np
 import numpy.testing as npt
@@ -49,7 +48,6 @@ def glass_values(key: str, **overrides: Any) -> dict[str, Any]:
         values['lens.surfaces.glass'] = list(glass)
     else:
         values['lens.glass'] = glass
-        values['lens.refractive_index'] = refractive_index(glass, entry['focus_wavelength_nm'])
     values['lens.wavelength_nm'] = entry['focus_wavelength_nm']
     values.update(overrides)
     return values
@@ -57,17 +55,7 @@ def glass_values(key: str, **overrides: Any) -> dict[str, Any]:
 
 def glass_model(key: str, width: int = 0, height: int = 0, **overrides: Any) -> LensModel:
     """Build a reference lens's model with its glass names (and ``overrides``)."""
-    values = glass_values(key, **overrides)
-    if 'lens.glass' in SPECS:
-        return build_model(values, width, height)
-    # Until the glass parameters are in the schema: the model of the numeric indices, with
-    # the glass names added to its values (what build_model will hold).
-    glass = {k: values.pop(k) for k in ('lens.glass', 'lens.surfaces.glass', 'lens.wavelength_nm')
-             if k in values}
-    switch = values.pop('output.lateral_color_correction', False)
-    model = build_model(values, width, height)
-    return replace(model, values=dict(model.values, **glass, **{
-        'output.lateral_color_correction': switch}))
+    return build_model(glass_values(key, **overrides), width, height)
 
 
 @pytest.mark.parametrize('key', LENSES)
@@ -278,10 +266,7 @@ def test_no_glass_reports_none() -> None:
 
 def test_cli_info_json_has_lateral_color(tmp_path: Path,
                                          capsys: pytest.CaptureFixture) -> None:
-    if 'lens.glass' not in SPECS:
-        pytest.skip('the glass parameters are not in the schema yet')
     params = tmp_path / 'bk7.yaml'
-    from mechdeconv_ros.params import to_params_yaml
     params.write_text(to_params_yaml(glass_values('case2_bk7')))
     assert main(['info', '--params', str(params), '--json']) == 0
     report = json.loads(capsys.readouterr().out)['lateral_color']
