@@ -145,6 +145,11 @@ def format_report(report: dict[str, Any]) -> str:
             line += (f"; light reaches {ri['lit_height_mm']:.4g} mm of the "
                      f"{ri['corner_height_mm']:.4g} mm to the corner")
         lines.append(line)
+    colour = report.get('lateral_color')
+    if colour:
+        waves = ', '.join(f"{c['name']} {c['wavelength_nm']:g}" for c in colour['channels'])
+        lines.append(f"lateral colour: R-B up to {colour['max_rb_separation_px']:.3g} px on the "
+                     f'raw image ({waves} nm, focused at {colour["focus_wavelength_nm"]:g} nm)')
     lines += [f'warning: {w}' for w in report['warnings']]
     return '\n'.join(lines)
 

@@ -6,14 +6,18 @@ End-to-end tests of correct_node with colour input, real rclpy (issue #20).
 Bayer frames (``bayer_*8`` / ``bayer_*16``) published on ``image_raw`` come out on
 ``image_rect`` as ``rgb8`` / ``rgb16``, pixel for pixel what ``demosaic`` + ``Rectifier`` give
 in-process; the ``debayer`` parameter is set as ``ros2 param set`` does; odd-sized and short
-mosaics are refused and counted as malformed frames. The node runs in its own process, as in
-test_node.py, and must exit 0 on SIGINT.
+mosaics are refused and counted as malformed frames. Lateral colour: switched on with the
+glass set in one atomic request, rgb8, bgr8 and demosaiced Bayer frames are corrected per
+channel (each channel with its colour's map, the same camera_info), mono frames with the one
+map (logged once); the switch without glass names is refused naming it. The node runs in its
+own process, as in test_node.py, and must exit 0 on SIGINT.
 """
 
 from __future__ import annotations
 
 import signal
-from typing import Iterator
+import time
+from typing import Any, Iterator
 
 from mechdeconv_ros.debayer import demosaic
 from mechdeconv_ros.image_msgs import image_to_array
@@ -24,7 +28,8 @@ import numpy.testing as npt
 import pytest
 from rclpy.parameter import Parameter
 from ros_helpers import make_image, next_domain_id, node_command, NodeProcess, ros_env, RosClient
-from test_node import case2_params, expected_model, FOLLOW_IMAGES, Harness, Outputs
+from test_node import (
+    assert_camera_infos, case2_params, expected_model, FOLLOW_IMAGES, Harness, Outputs)
 
 pytestmark = pytest.mark.ros
 
@@ -136,3 +141,77 @@ def test_debayer_parameter_refuses_unknown_methods(harness: Harness) -> None:
     result = harness.client.set_parameters(Parameter('debayer', Parameter.Type.STRING, 'ahd'))
     assert not result[0].successful
     assert 'debayer' in result[0].reason
+
+
+#: Case 2 in N-BK7, focused at 550 nm: about 1 px of lateral colour at the raw corner.
+GLASS = {'lens.glass': 'SCHOTT:N-BK7', 'lens.wavelength_nm': 550.0}
+
+
+def _lateral(harness: Harness, on: bool) -> None:
+    params = [Parameter('lens.glass', Parameter.Type.STRING, GLASS['lens.glass'] if on else ''),
+              Parameter('lens.wavelength_nm', Parameter.Type.DOUBLE,
+                        GLASS['lens.wavelength_nm'] if on else 587.56),
+              Parameter('output.lateral_color_correction', Parameter.Type.BOOL, on)]
+    result = harness.client.set_parameters_atomically(*params)
+    assert result.successful, result.reason
+    harness.values.update({p.name: p.value for p in params})
+
+
+def _until_lateral(harness: Harness, outputs: Outputs, msg: Any, expected: np.ndarray,
+                   timeout: float = 8.0) -> dict[str, Any]:
+    """Exchange frames until the node's output is the expected one (the rebuild is async)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        result = harness.exchange(outputs, msg)
+        got, _ = image_to_array(result['image'])
+        if np.array_equal(got, expected) or time.monotonic() > deadline:
+            npt.assert_array_equal(got, expected)
+            return result
+
+
+def test_lateral_colour_corrects_each_channel_with_its_own_map(
+        harness: Harness, outputs: Outputs) -> None:
+    width, height = SIZE
+    rng = np.random.default_rng(1)
+    src = rng.integers(0, 256, (height, width, 3), dtype=np.uint8)
+    try:
+        _lateral(harness, True)
+        model = expected_model(harness.values, width, height)
+        lateral = Rectifier(model)
+        assert lateral.colour is not None
+        plain = Rectifier(model, lateral=False)
+        rgb = lateral.correct(src, colours=(0, 1, 2))
+        assert not np.array_equal(rgb, plain.correct(src)), 'the lens must show lateral colour'
+        result = _until_lateral(harness, outputs, make_image(src, 'rgb8'), rgb)
+        assert_camera_infos(result, model)
+        # bgr8: the same pixels in the other order get each its colour's map.
+        bgr = src[..., ::-1].copy()
+        result = harness.exchange(outputs, make_image(bgr, 'bgr8'))
+        got, _ = image_to_array(result['image'])
+        npt.assert_array_equal(got, lateral.correct(bgr, colours=(2, 1, 0)))
+        npt.assert_array_equal(got[..., ::-1], rgb)
+        # A Bayer frame: demosaiced, then per channel.
+        raw = mosaic(height, width, np.uint8)
+        result = harness.exchange(outputs, make_image(raw, 'bayer_rggb8'))
+        got, _ = image_to_array(result['image'])
+        npt.assert_array_equal(got, lateral.correct(demosaic(raw, 'rggb', 'vng'),
+                                                    colours=(0, 1, 2)))
+        # mono8 ignores the switch: the one map, and one log line however many frames.
+        mono = src[..., 1].copy()
+        for _ in range(2):
+            result = harness.exchange(outputs, make_image(mono, 'mono8'))
+        got, _ = image_to_array(result['image'])
+        npt.assert_array_equal(got, plain.correct(mono))
+        log = harness.proc.output()
+        assert log.count('mono8 has no known colour channels') == 1, log[-2000:]
+        assert 'largest R-B separation on the raw image' in log
+    finally:
+        _lateral(harness, False)
+
+
+def test_lateral_colour_without_glass_is_refused_naming_it(harness: Harness) -> None:
+    result = harness.client.set_parameters(
+        Parameter('output.lateral_color_correction', Parameter.Type.BOOL, True))[0]
+    assert not result.successful
+    assert 'output.lateral_color_correction' in result.reason
+    assert 'lens.glass' in result.reason
