@@ -44,10 +44,10 @@ import time
 from typing import Any, Mapping, TYPE_CHECKING
 
 from mechdeconv_ros.glass import GlassError, lookup
-from mechdeconv_ros.lens_source import TracedSource
-from mechdeconv_ros.model_base import FloatArray, is_prescription_mode, ModelError
-from mechdeconv_ros.prescription import Prescription
+from mechdeconv_ros.lens_source import FloatArray, ModelError, Prescription, TracedSource
+from mechdeconv_ros.model_base import is_prescription_mode
 from mechdeconv_ros.radial_map import hermite, RadialMap, resample, trace_angles
+from mechdeconv_ros.raytrace import trace_field
 import numpy as np
 
 if TYPE_CHECKING:
@@ -178,13 +178,14 @@ class ChannelSource(TracedSource):
     def real_heights(self, field_angle_rad: FloatArray, distance_mm: float,
                      guide: Any = None) -> tuple[FloatArray, FloatArray]:
         """Trace the channel's chief rays of the model's object points (module docstring)."""
-        if math.isinf(distance_mm):
-            return super().real_heights(field_angle_rad, distance_mm, guide)
-        shift = (self.first_order().front_principal_z_mm
-                 - self._base.first_order().front_principal_z_mm)
-        distance_c = distance_mm + shift
-        theta_c = np.arctan(np.tan(field_angle_rad) * (distance_mm / distance_c))
-        return super().real_heights(theta_c, distance_c, guide)
+        sensor_z, _ = self._base.image_plane(distance_mm)
+        theta, distance_c = np.asarray(field_angle_rad, dtype=np.float64), distance_mm
+        if not math.isinf(distance_mm):
+            distance_c += (self.first_order().front_principal_z_mm
+                           - self._base.first_order().front_principal_z_mm)
+            theta = np.arctan(np.tan(theta) * (distance_mm / distance_c))
+        real, offsets = trace_field(self.prescription, distance_c, sensor_z, theta, guide)
+        return -real, offsets
 
 
 @dataclass(frozen=True)
@@ -300,9 +301,13 @@ def trace_channels(model: LensModel) -> LateralColor:
     v = model.image_distance_mm
     field = model.field_curve
     traces = []
+    focus = float(values.get('lens.wavelength_nm', math.nan))
     for name, wavelength in zip(CHANNELS, wavelengths(values)):
-        source = ChannelSource(base, wavelength, values)
-        traced = trace_angles(source, distance, v, field.field_angle_rad, field)
+        if wavelength == focus:
+            traced = field          # the model's own lens and trace (the glass at lambda_0)
+        else:
+            source = ChannelSource(base, wavelength, values)
+            traced = trace_angles(source, distance, v, field.field_angle_rad, field)
         if traced.ideal_mm.size < 16:
             raise ModelError(WAVELENGTHS, f'{name} at {wavelength:g} nm: no chief ray reaches '
                                           'the sensor')
@@ -311,8 +316,7 @@ def trace_channels(model: LensModel) -> LateralColor:
         traces.append(ChannelTrace(name, wavelength, traced, curve))
     trace_ms = (time.perf_counter() - start) * 1e3
     separation, where = _max_separation(model, traces)
-    return LateralColor(tuple(traces), trace_ms, separation, where,
-                        float(values.get('lens.wavelength_nm', math.nan)))
+    return LateralColor(tuple(traces), trace_ms, separation, where, focus)
 
 
 def _distance(values: Mapping[str, Any]) -> float:

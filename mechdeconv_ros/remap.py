@@ -175,6 +175,12 @@ def _build_maps(model: LensModel, gain_table: npt.NDArray[np.float64] | None
     return map_x, map_y, gain
 
 
+def _same_curve(a: Any, b: Any) -> bool:
+    """Return True when two radial maps are the same samples."""
+    return bool(a.ideal_mm.shape == b.ideal_mm.shape and np.array_equal(a.real_mm, b.real_mm)
+                and np.array_equal(a.ideal_mm, b.ideal_mm))
+
+
 class Rectifier:
     """
     The maps of one LensModel, built once, and the per-frame correction.
@@ -230,7 +236,9 @@ class Rectifier:
             lateral = bool(model.values.get('output.lateral_color_correction', False))
         if lateral:
             start = time.perf_counter()
-            maps = [build_float_maps(channel_model(model, channel))
+            # A channel at the focus wavelength has the model's own curve: reuse its maps.
+            maps = [(self.map1, self.map2) if _same_curve(channel.curve, model.curve)
+                    else build_float_maps(channel_model(model, channel))
                     for channel in model.lateral_color().channels]
             self.colour = ChannelRemap(maps, model.width, model.height)
             self.lateral_color_ms = (time.perf_counter() - start) * 1e3

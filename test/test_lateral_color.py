@@ -95,6 +95,12 @@ def test_green_at_the_focus_wavelength_is_the_model() -> None:
     assert green.wavelength_nm == model.values['lens.wavelength_nm']
     npt.assert_array_equal(green.curve.ideal_mm, model.curve.ideal_mm[:green.curve.ideal_mm.size])
     npt.assert_allclose(green.curve.real_mm, model.curve.real_mm, rtol=0.0, atol=1e-9)
+    # The channel source itself, at the focus wavelength, traces the model's lens (the trace
+    # above reuses the model's; this checks the source that the other channels use).
+    field = model.field_curve
+    source = lateral_color.ChannelSource(model.source, green.wavelength_nm, model.values)
+    heights, _ = source.real_heights(field.field_angle_rad, 1000.0)
+    npt.assert_allclose(heights, field.real_mm, rtol=0.0, atol=1e-12)
 
 
 def test_switch_without_glass_names_is_refused_naming_it() -> None:
@@ -105,7 +111,21 @@ def test_switch_without_glass_names_is_refused_naming_it() -> None:
     assert 'lens.glass' in str(info.value)
     values = load_params_file(REPO / 'config' / 'cooke_triplet.yaml')
     values['output.lateral_color_correction'] = True
+    assert build_model(values).lateral_color().max_rb_separation_px < 0.1, 'its glasses named'
+    values['lens.surfaces.glass'] = []
     with pytest.raises(ModelError, match='lens.surfaces.glass'):
+        build_model(values)
+
+
+def test_channel_wavelength_beyond_a_glass_formula_is_refused_naming_it() -> None:
+    values = load_params_file(REPO / 'config' / 'cooke_triplet.yaml')
+    values.update({'output.lateral_color_correction': True,
+                   'lens.channel_wavelengths_nm': [750.0, 550.0, 465.0]})
+    with pytest.raises(ModelError, match='lens.channel_wavelengths_nm') as info:
+        build_model(values)
+    assert 'SK16' in str(info.value)
+    values['lens.channel_wavelengths_nm'] = [610.0, 550.0]
+    with pytest.raises(ModelError, match='three wavelengths'):
         build_model(values)
 
 
