@@ -14,9 +14,9 @@ theta, h(theta) = f theta + a3 theta^3 + a5 theta^5 + ..., so the focal ratio
 q = h / theta = f + a3 s + a5 s^2 + ... is a smooth function of s = theta^2 with q(0) = f.
 h(theta) = theta q(theta^2), q the not-a-knot cubic spline through (0, f) and
 (theta_i^2, h_i / theta_i). It has rho(0) = 0 and slope f at the axis by construction, and
-reproduces a traced 160-deg wide-angle lens sampled every 5 deg within 0.005 px of 2 um to
-90 deg (test/test_datasheet.py), where a PCHIP on h(theta) is off by 0.12 px at 80 deg and
-1.4 px at 90 deg. A spline can overshoot between points: when the interpolated h is not
+reproduces a traced 160-deg wide-angle lens sampled every 5 deg within 0.006 px of 2 um to
+90 deg (docs/design.md section 2.13), where a PCHIP on h(theta) is off by 0.12 px at 80 deg
+and 1.4 px at 90 deg. A spline can overshoot between points: when the interpolated h is not
 strictly increasing on a dense grid, the table falls back to the monotone PCHIP
 (Fritsch-Carlson) on h(theta) with slope f at the axis, and says so in the model's warnings.
 Beyond the last point nothing is extrapolated: the valid field ends there.

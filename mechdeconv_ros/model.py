@@ -368,6 +368,8 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
                          'the lens')
     try:
         sensor_z, v = source.image_plane(distance)
+    except ModelError:
+        raise       # already names its parameter (lens.image_distance_mm)
     except ValueError as err:
         raise ModelError('scene.distance_mm', str(err)) from None
     # The rules of every source (paraxial), then the ones on its surfaces (docs/design.md s. 7).

@@ -29,8 +29,9 @@ it, D the pupil diameter.
 
 Refusals (``lens.image_distance_mm``): the sensor must clear the last surface's rim (d must
 exceed that surface's sagitta at its clear semi-aperture when it bulges towards the sensor);
-and v_K must be positive (the sensor behind the exit pupil, where the chief rays have crossed
-the axis: an image the right way up would be no camera).
+and v_K must be positive: v_K is linear in z_s, v on the image plane and 0 at the exit pupil
+(where the chief rays cross the axis behind the lens), so a sensor across a real exit pupil
+from the image would see the scene upright through a blur, no camera image.
 """
 
 from __future__ import annotations
@@ -105,12 +106,13 @@ def chief_ray_scale(prescription: Prescription, distance: float, front_principal
             return math.nan
         y, nu = distance, -a_s * distance / b_s
     else:
-        # Parallel rays of slope u = 1; choose the height at z0 to hit the stop centre.
+        # Parallel rays from a scene point above the axis descend: slope u = -1 (tan theta =
+        # 1); choose the height at z0 to hit the stop centre: A_s y - B_s n0 = 0.
         a_s = _ray_height(prescription, z0, 1.0, 0.0, z_stop)
         b_s = _ray_height(prescription, z0, 0.0, 1.0, z_stop)
         if a_s == 0.0:
             return math.nan
-        y, nu = -b_s * n0 / a_s, n0
+        y, nu = b_s * n0 / a_s, -n0
     return -_ray_height(prescription, z0, y, nu, z_mm)
 
 
@@ -175,9 +177,13 @@ def sensor_plane(prescription: Prescription, distance: float, front_principal_z:
     z_sensor = z_last + image_distance_mm
     v = chief_ray_scale(prescription, distance, front_principal_z, z_sensor)
     if not v > 0.0:
-        raise ModelError(PARAMETER, f'{image_distance_mm:g} mm puts the sensor in front of the '
-                                    'exit pupil, where the chief rays have not yet crossed the '
-                                    f'axis (image scale {v:.4g} mm): the image would be upright '
-                                    f'and blurred; the paraxial image lies '
-                                    f'{image_z - z_last:.4g} mm behind the last vertex')
+        # v_K is linear in z and equals v > 0 on the image plane: it vanishes where the chief
+        # rays cross the axis behind the lens (the exit pupil).
+        z_pupil = image_z - image_v * (z_sensor - image_z) / (v - image_v) \
+            if v != image_v else math.nan
+        raise ModelError(PARAMETER, f'{image_distance_mm:g} mm puts the sensor at z = '
+                                    f'{z_sensor:.4g} mm, across the exit pupil (z = '
+                                    f'{z_pupil:.4g} mm, where the chief rays cross the axis) '
+                                    f'from the image of the scene (z = {image_z:.4g} mm): the '
+                                    f'image scale there is {v:.4g} mm, no camera image forms')
     return SensorPlane(z_sensor, v, image_z, image_v)
