@@ -41,7 +41,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 import math
 import time
-from typing import Any, Mapping, TYPE_CHECKING
+from typing import Any, Mapping
 
 from mechdeconv_ros.glass import GlassError, lookup
 from mechdeconv_ros.lens_source import FloatArray, ModelError, Prescription, TracedSource
@@ -50,8 +50,8 @@ from mechdeconv_ros.radial_map import hermite, RadialMap, resample, trace_angles
 from mechdeconv_ros.raytrace import trace_field
 import numpy as np
 
-if TYPE_CHECKING:
-    from mechdeconv_ros.model import LensModel
+#: A :class:`mechdeconv_ros.model.LensModel` (not imported: the model imports this module).
+LensModel = Any
 
 #: The channels, in the order of ``lens.channel_wavelengths_nm``.
 CHANNELS = ('R', 'G', 'B')

@@ -439,6 +439,8 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
         max_displacement_px=max_disp,
         interpolation=CV_INTERPOLATION[str(vals['output.interpolation'])],
         projection=projection, field_curve=coarse, warnings=tuple(warnings))
+    if vals['output.lateral_color_correction']:
+        model.lateral_color()       # its three traces: a channel no ray passes is refused now
     return model
 
 
