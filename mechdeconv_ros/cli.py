@@ -31,6 +31,8 @@ from mechdeconv_ros.params import BAYER_PATTERNS, check_values, load_params_file
 import numpy as np
 import yaml
 
+#: The colour (0 R, 1 G, 2 B) of each channel of an image cv2.imread returns, by channel count.
+BGR_COLOURS = {3: (2, 1, 0), 4: (2, 1, 0, 1)}
 IMAGE_SUFFIXES = ('.png', '.jpg', '.jpeg', '.bmp', '.tif', '.tiff', '.pgm', '.ppm')
 
 
@@ -264,7 +266,10 @@ def cmd_correct(args: argparse.Namespace) -> int:
         size = (image.shape[1], image.shape[0])
         if size not in rectifiers:
             rectifiers[size] = Rectifier(_model(args, *size))
-        corrected = rectifiers[size].correct(image)
+        # OpenCV reads colour files as BGR(A): each channel gets its colour's map (lateral
+        # colour correction; without it the colours change nothing).
+        colours = BGR_COLOURS.get(image.shape[2] if image.ndim == 3 else 1)
+        corrected = rectifiers[size].correct(image, colours=colours)
         if not cv2.imwrite(str(out), corrected):
             raise UsageError(f'{out}: cannot write the image there')
     return 0

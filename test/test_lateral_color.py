@@ -291,3 +291,18 @@ def test_cli_info_json_has_lateral_color(tmp_path: Path,
     assert main(['info', '--params', str(params), '--json']) == 0
     report = json.loads(capsys.readouterr().out)['lateral_color']
     assert report['max_rb_separation_px'] == pytest.approx(1.01, abs=0.02)
+
+
+def test_cli_correct_applies_lateral_colour_to_bgr_files(tmp_path: Path) -> None:
+    params = tmp_path / 'bk7.yaml'
+    values = glass_values('case2_bk7', **{'output.lateral_color_correction': True})
+    params.write_text(to_params_yaml(values))
+    rng = np.random.default_rng(0)
+    bgr = rng.integers(0, 256, (480, 640, 3), dtype=np.uint8)
+    cv2.imwrite(str(tmp_path / 'in.png'), bgr)
+    assert main(['correct', '--params', str(params), str(tmp_path / 'in.png'),
+                 str(tmp_path / 'out.png')]) == 0
+    written = cv2.imread(str(tmp_path / 'out.png'), cv2.IMREAD_UNCHANGED)
+    rectifier = Rectifier(build_model(values))
+    npt.assert_array_equal(written, rectifier.correct(bgr, colours=(2, 1, 0)))
+    assert not np.array_equal(written, rectifier.correct(bgr))
