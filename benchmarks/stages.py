@@ -282,10 +282,11 @@ def measure_rung(probe: Probe, rung: str, width: int, height: int, env: Mapping[
     return result
 
 
-def child_main(quick: bool, out_json: Path, baseline: str = '') -> int:
-    """Measure every rung at every size (this process has the shm profile)."""
+def child_main(quick: bool, out_json: Path, baseline: str = '',
+               only: Sequence[str] = RUNGS) -> int:
+    """Measure the rungs at every size (this process has the shm profile)."""
     sizes = QUICK_SIZES if quick else SIZES
-    rungs = RUNGS + (('baseline',) if baseline else ())
+    rungs = tuple(only) + (('baseline',) if baseline else ())
     rounds, window_s, warmup_s = (1, 1.0, 0.5) if quick else (ROUNDS, WINDOW_S, WARMUP_S)
     env = dict(os.environ)
     doc: dict[str, Any] = {'bare_remap': {}, 'runs': [], 'errors': []}
@@ -352,7 +353,8 @@ def evaluate(doc: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
-def run(out_dir: Path = RESULTS, quick: bool = False, baseline: str = '') -> dict[str, Any]:
+def run(out_dir: Path = RESULTS, quick: bool = False, baseline: str = '',
+        only: Sequence[str] = RUNGS) -> dict[str, Any]:
     """
     Run the stage benchmark in a child process; write ``stages.json`` into ``out_dir``.
 
@@ -361,6 +363,7 @@ def run(out_dir: Path = RESULTS, quick: bool = False, baseline: str = '') -> dic
     :param baseline: a checkout of the repository whose correct_node runs as one more rung,
         ``baseline`` (before/after comparisons in one run; its stages are timed only if it
         has the stage clock).
+    :param only: the rungs to run (default all).
     :return: the results document.
     """
     log_dir = Path(tempfile.mkdtemp(prefix='mechdeconv_bench_stages_parent_'))
@@ -370,6 +373,7 @@ def run(out_dir: Path = RESULTS, quick: bool = False, baseline: str = '') -> dic
         argv.append('--quick')
     if baseline:
         argv += ['--baseline', str(Path(baseline).resolve())]
+    argv += ['--rungs', ','.join(only)]
     child = start_child(argv, ros_env(pick_domain_id('benchmarks', 91), 'shm'), log_dir,
                         'child_stages')
     start = time.monotonic()
@@ -387,7 +391,7 @@ def run(out_dir: Path = RESULTS, quick: bool = False, baseline: str = '') -> dic
         shutil.rmtree(log_dir, ignore_errors=True)
     doc = {'benchmark': 'stages', 'machine': machine_info(), 'method': __doc__,
            'load_average_1min': os.getloadavg()[0], 'rate_hz': RATE_HZ,
-           'rungs': list(RUNGS) + (['baseline'] if baseline else []),
+           'rungs': list(only) + (['baseline'] if baseline else []),
            'stages': list(STAGES), 'bare_remap': measured['bare_remap'],
            'runs': measured['runs'], 'errors': errors}
     doc['targets'] = evaluate(doc)
@@ -488,10 +492,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--out', type=Path, default=RESULTS, help='results folder')
     parser.add_argument('--baseline', default='',
                         help="another checkout's correct_node as one more rung")
+    parser.add_argument('--rungs', default=','.join(RUNGS),
+                        help='comma-separated subset of: ' + ', '.join(RUNGS))
     args = parser.parse_args(argv)
+    only = tuple(r for r in args.rungs.split(',') if r)
+    if any(r not in RUNGS for r in only):
+        parser.error(f'unknown rung in {only}')
     if args.child:
-        return child_main(args.quick, args.out_json, args.baseline)
-    doc = run(args.out, quick=args.quick, baseline=args.baseline)
+        return child_main(args.quick, args.out_json, args.baseline, only)
+    doc = run(args.out, quick=args.quick, baseline=args.baseline, only=only)
     print('\n'.join(tables(doc)))
     return 0 if not doc['errors'] else 1
 
