@@ -11,8 +11,8 @@ Run every benchmark (``make bench``) and write the full measured tables.
 Waits (up to ``--wait-load`` seconds, default 600) for the 1-minute load average to drop
 below 0.5, so the timings are taken on a quiet machine; then runs :mod:`benchmarks.accuracy`,
 :mod:`benchmarks.speed`, :mod:`benchmarks.node_latency`, :mod:`benchmarks.stages`,
-:mod:`benchmarks.wide`,
-:mod:`benchmarks.vignetting` and :mod:`benchmarks.compressed_input`, each writing its
+:mod:`benchmarks.wide`, :mod:`benchmarks.vignetting`, :mod:`benchmarks.colour` and
+:mod:`benchmarks.compressed_input`, each writing its
 ``results/<name>.json`` and figures, and finally prints the markdown tables (made by
 :mod:`benchmarks.report`) and writes them to ``results/README_tables.md`` and to
 ``docs/benchmarks.md`` (a generated file: the machine line at the top, figure links relative
@@ -32,7 +32,8 @@ import time
 from typing import Any, Callable
 
 from benchmarks import (
-    accuracy, compressed_input, node_latency, report, speed, stages, vignetting, wide)
+    accuracy, colour, compressed_input, node_latency, report, speed, stages, vignetting,
+    wide)
 from benchmarks.common import log, RESULTS, wait_for_low_load
 from benchmarks.report import machine_info, machine_line, write_json
 
@@ -43,6 +44,7 @@ BENCHMARKS: dict[str, tuple[Callable[..., Any], Callable[[Any], list[str]]]] = {
     'stages': (stages.run, stages.tables),
     'wide': (wide.run, wide.tables),
     'vignetting': (vignetting.run, vignetting.tables),
+    'colour': (colour.run, colour.tables),
     'compressed': (compressed_input.run,
                    lambda doc: ['### Compressed input (JPEG q90 at 30 Hz)', '',
                                 compressed_input.table(doc), '']),

@@ -6,7 +6,7 @@
 Commands::
 
     mechdeconv info --params FILE [--width W --height H] [--json]
-    mechdeconv correct --params FILE IN OUT          (an image, or a folder to a folder)
+    mechdeconv correct --params FILE [--bayer PATTERN] IN OUT   (an image, or a folder)
     mechdeconv plot --params FILE OUT.png
     mechdeconv camera-info --params FILE [--width W --height H]
     mechdeconv vignetting --params FILE [--png OUT.png] [--lensfun]
@@ -15,7 +15,9 @@ Commands::
 
 ``--params`` takes a ROS 2 params file (``/**: ros__parameters:``) such as config/case2.yaml;
 ``-p name=value`` overrides one parameter. Bad input prints one line naming the parameter or
-file and exits with status 2.
+file and exits with status 2. ``correct --bayer rggb`` (or bggr, gbrg, grbg) reads each input as
+a raw one-channel 8- or 16-bit Bayer mosaic, demosaics it with the ``debayer`` parameter
+(:mod:`mechdeconv_ros.debayer`) and writes the corrected colour image.
 """
 
 from __future__ import annotations
@@ -27,10 +29,12 @@ import sys
 from typing import Any, Sequence
 
 from mechdeconv_ros.model import build_model, camera_info_yaml, LensModel, ModelError
-from mechdeconv_ros.params import check_values, load_params_file, SPECS
+from mechdeconv_ros.params import BAYER_PATTERNS, check_values, load_params_file, SPECS
 import numpy as np
 import yaml
 
+#: The colour (0 R, 1 G, 2 B) of each channel of an image cv2.imread returns, by channel count.
+BGR_COLOURS = {3: (2, 1, 0), 4: (2, 1, 0, 1)}
 IMAGE_SUFFIXES = ('.png', '.jpg', '.jpeg', '.bmp', '.tif', '.tiff', '.pgm', '.ppm')
 
 
@@ -145,6 +149,11 @@ def format_report(report: dict[str, Any]) -> str:
             line += (f"; light reaches {ri['lit_height_mm']:.4g} mm of the "
                      f"{ri['corner_height_mm']:.4g} mm to the corner")
         lines.append(line)
+    colour = report.get('lateral_color')
+    if colour:
+        waves = ', '.join(f"{c['name']} {c['wavelength_nm']:g}" for c in colour['channels'])
+        lines.append(f"lateral colour: R-B up to {colour['max_rb_separation_px']:.3g} px on the "
+                     f'raw image ({waves} nm, focused at {colour["focus_wavelength_nm"]:g} nm)')
     lines += [f'warning: {w}' for w in report['warnings']]
     return '\n'.join(lines)
 
@@ -211,6 +220,27 @@ def _read(path: Path) -> np.ndarray:
     return image
 
 
+def _demosaic(args: argparse.Namespace, path: Path, image: np.ndarray, method: str
+              ) -> np.ndarray:
+    """Demosaic a ``--bayer`` input into BGR (what cv2.imwrite writes); refuse a non-mosaic."""
+    import cv2
+
+    from mechdeconv_ros.debayer import demosaic, method_for
+
+    if image.ndim != 2 or image.dtype not in (np.uint8, np.uint16):
+        raise UsageError(f'{path}: --bayer {args.bayer} needs a one-channel 8- or 16-bit raw '
+                         f'mosaic, got {image.shape[2] if image.ndim == 3 else 1} channels of '
+                         f'{image.dtype}')
+    if image.shape[0] % 2 or image.shape[1] % 2:
+        raise UsageError(f'{path}: a Bayer mosaic needs an even width and height (whole 2x2 '
+                         f'tiles), got {image.shape[1]}x{image.shape[0]}')
+    if method_for(method, image.dtype) != method:
+        _warn_once(args, ["debayer: OpenCV's VNG demosaics 8-bit mosaics only; 16-bit "
+                          'mosaics are demosaiced edge_aware instead'])
+    rgb = demosaic(image, args.bayer, method)
+    return cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)
+
+
 def cmd_correct(args: argparse.Namespace) -> int:
     """Correct an image file, or every image of a folder into a folder."""
     import cv2
@@ -230,12 +260,18 @@ def cmd_correct(args: argparse.Namespace) -> int:
     else:
         raise UsageError(f'{src}: no such file or folder')
     rectifiers: dict[tuple[int, int], Rectifier] = {}
+    method = str(_values(args)['debayer']) if args.bayer else ''
     for path, out in tqdm(pairs, desc='correcting', unit='image', disable=len(pairs) < 2):
         image = _read(path)
+        if args.bayer:
+            image = _demosaic(args, path, image, method)
         size = (image.shape[1], image.shape[0])
         if size not in rectifiers:
             rectifiers[size] = Rectifier(_model(args, *size))
-        corrected = rectifiers[size].correct(image)
+        # OpenCV reads colour files as BGR(A): each channel gets its colour's map (lateral
+        # colour correction; without it the colours change nothing).
+        colours = BGR_COLOURS.get(image.shape[2] if image.ndim == 3 else 1)
+        corrected = rectifiers[size].correct(image, colours=colours)
         if not cv2.imwrite(str(out), corrected):
             raise UsageError(f'{out}: cannot write the image there')
     return 0
@@ -337,6 +373,10 @@ def build_parser() -> argparse.ArgumentParser:
     add('camera-info', 'print camera_calibration_parsers YAML of the raw camera',
         True).set_defaults(func=cmd_camera_info)
     correct = add('correct', 'correct an image, or every image of a folder', False)
+    correct.add_argument('--bayer', choices=BAYER_PATTERNS, metavar='PATTERN',
+                         help='the inputs are raw Bayer mosaics with this 2x2 tile (rggb, bggr, '
+                              'gbrg or grbg, top-left pixel first as the ROS bayer_* '
+                              'encodings): demosaic them (parameter debayer) and write colour')
     correct.add_argument('input', help='image file or folder')
     correct.add_argument('output', help='output image file or folder')
     correct.set_defaults(func=cmd_correct)

@@ -7,7 +7,8 @@ Topics (relative names: namespaces and remaps apply; ``/diagnostics`` is absolut
 ``image_raw`` (sensor_msgs/Image) or, with ``image_transport:=compressed`` (read at start-up,
 as image_proc's), the RESOLVED ``image_raw`` + ``/compressed`` (sensor_msgs/CompressedImage,
 decoded by :mod:`~mechdeconv_ros.frame_io`), subscribed only while an output has a subscriber
-unless ``lazy_subscription`` is false; out, ``image_rect`` (the input's encoding and header),
+unless ``lazy_subscription`` is false; out, ``image_rect`` (the input's encoding and header;
+Bayer input is demosaiced first, by ``debayer``, and published as rgb8 / rgb16),
 ``camera_info`` (raw K and the equivalent D), ``camera_info_rect`` (K_new, D = 0),
 ``image_rect/compressed`` (only while subscribed) and ``/diagnostics`` (1 Hz,
 :mod:`~mechdeconv_ros.diagnostics`). README "Node API" has the details.
@@ -55,11 +56,13 @@ from typing import Any, Callable
 
 import cv2
 from diagnostic_msgs.msg import DiagnosticArray
+from mechdeconv_ros.debayer import Demosaicer
 from mechdeconv_ros.diagnostics import diagnostics_message, FrameStats
 from mechdeconv_ros.frame_io import (
-    compressed_output, COMPRESSED_PARAMS, compressed_settings, FrameRefused, read_compressed,
-    read_image, sensor_qos)
+    compressed_output, COMPRESSED_PARAMS, compressed_settings, demosaic_frame, FrameRefused,
+    read_compressed, read_image, sensor_qos)
 from mechdeconv_ros.image_msgs import camera_infos_from_model, Encoding, OutputImagePool
+from mechdeconv_ros.lateral_color import COLOUR_ORDER
 from mechdeconv_ros.live_model import (  # noqa: F401 - MAX_SURFACES: the node's limit
     changes_of, FrameDropped, LiveModel, MAX_SURFACES)
 from mechdeconv_ros.node_main import log_function, run_node
@@ -103,6 +106,12 @@ class CorrectNode(Node):
         self._logged: dict[str, float] = {}         # kind of error -> time last logged, s
         self._channels = 1          # of the last frame: the rebuild prepares its gain map
         self._depth_gain_noted = False
+        self._demosaicer = Demosaicer()     # Bayer input (issue #20)
+        # Lateral colour (issue #20): the channel colours of the last frame (the rebuild
+        # folds its maps for them) and the encodings already told that they ignore it.
+        self._colours: tuple[int, ...] | None = None
+        self._colourless_noted: set[str] = set()
+        self._lateral_logged: Any = None
         self._warned_model: Any = None
         self._compressed_wanted = False     # image_rect/compressed has a subscriber
         self._stage_clock = stage_clock_from_env()    # None unless MECHDECONV_STAGE_TIMES is set
@@ -114,6 +123,7 @@ class CorrectNode(Node):
                                  bool(kwargs.get('allow_undeclared_parameters', False)))
         self._apply_threads()
         self._compressed_settings = compressed_settings(self._live.value)
+        self._debayer = str(self._live.value('debayer'))    # read on set, not per frame
         self._stats.image_transport = str(self._live.value('image_transport'))
         self._stats.input_topic = self.resolve_topic_name('image_raw') + (
             '/compressed' if self._stats.image_transport == 'compressed' else '')
@@ -174,6 +184,8 @@ class CorrectNode(Node):
             self._update_subscription()
         if changed & set(COMPRESSED_PARAMS):
             self._compressed_settings = compressed_settings(self._live.value)
+        if 'debayer' in changed:
+            self._debayer = str(self._live.value('debayer'))
 
     def _build_maps(self, model: Any) -> Rectifier:
         """
@@ -187,6 +199,17 @@ class CorrectNode(Node):
         so a race between the two callers at worst logs it twice.
         """
         rectifier = Rectifier(model)
+        if rectifier.colour is not None:   # lateral colour (issue #20)
+            rectifier.prepare_colours(self._colours)
+            if model is not self._lateral_logged:
+                self._lateral_logged = model
+                traces = model.lateral_color()
+                self.get_logger().info(
+                    f'output.lateral_color_correction: R, G, B traced at '
+                    f"{', '.join(f'{ch.wavelength_nm:g}' for ch in traces.channels)} nm and "
+                    f'mapped in {rectifier.lateral_color_ms:.1f} ms (traces '
+                    f'{traces.trace_ms:.1f} ms); largest R-B separation on the raw image '
+                    f'{traces.max_rb_separation_px:.3g} px')
         if rectifier.gain is not None:
             rectifier.gain_for(self._channels)
             # (The allocator warm-up builds a model's maps again: warn once per model.)
@@ -220,6 +243,12 @@ class CorrectNode(Node):
         self._stats.frames_in += 1
         try:
             pixels, encoding = read(msg, self._stats)
+            # --- Bayer input (issue #20): demosaic, then correct as rgb8 / rgb16 ---
+            if encoding.bayer:
+                pixels, encoding, note = demosaic_frame(
+                    pixels, encoding, self._demosaicer, self._debayer, self._stats)
+                if note:
+                    self.get_logger().info(note)
         except FrameRefused as refused:
             return self._frame_error(refused.kind, refused.error, refused.line)
         if clock is not None:
@@ -247,8 +276,9 @@ class CorrectNode(Node):
             if clock is not None:
                 clock.mark('model')
             # Depth is never gain-corrected (a distance divided by RI means nothing).
+            colours = COLOUR_ORDER.get(encoding.name)
             active.rectifier.correct(pixels, out.pixels, nearest=encoding.depth,
-                                     gain=not encoding.depth)
+                                     gain=not encoding.depth, colours=colours)
             if clock is not None:
                 clock.mark('remap')
             # The image first: what comes after it is off the image's latency.
@@ -266,6 +296,13 @@ class CorrectNode(Node):
             if clock is not None:
                 clock.mark('publish_info_rect')
             self._channels = 1 if pixels.ndim == 2 else int(pixels.shape[2])
+            self._colours = colours
+            if active.rectifier.colour is not None and colours is None and \
+                    encoding.name not in self._colourless_noted:
+                self._colourless_noted.add(encoding.name)
+                self.get_logger().info(
+                    f'output.lateral_color_correction: {encoding.name} has no known colour '
+                    'channels; it is corrected with the one map of the model')
             if encoding.depth and active.rectifier.gain is not None and \
                     not self._depth_gain_noted:
                 self._depth_gain_noted = True

@@ -8,10 +8,11 @@ CompressedImage, JPEG/PNG by :mod:`mechdeconv_ros.compressed`) return the pixels
 view and their :class:`~mechdeconv_ros.image_msgs.Encoding`, or raise :class:`FrameRefused`
 after counting the frame in :class:`~mechdeconv_ros.diagnostics.FrameStats`: an unknown
 encoding in ``rejected_encodings``, a malformed Image in ``frames_failed``, an undecodable
-payload in ``frames_undecodable``. :func:`compressed_output` encodes a corrected image as
-image_transport's compressed plugin writes it; :func:`sensor_qos` is the frame topics' QoS.
-Called in the executor thread only (the frame
-callback), which owns the counters.
+payload in ``frames_undecodable``. :func:`demosaic_frame` turns a Bayer mosaic into
+``rgb8`` / ``rgb16`` (:mod:`mechdeconv_ros.debayer`). :func:`compressed_output` encodes a
+corrected image as image_transport's compressed plugin writes it; :func:`sensor_qos` is the
+frame topics' QoS. Called in the executor thread only (the frame callback), which owns the
+counters.
 """
 
 from __future__ import annotations
@@ -21,9 +22,10 @@ import time
 from typing import Any, Callable
 
 from mechdeconv_ros.compressed import decode, encode, UnsupportedCompressedFormatError
+from mechdeconv_ros.debayer import Demosaicer
 from mechdeconv_ros.diagnostics import FrameStats
 from mechdeconv_ros.image_msgs import (
-    Encoding, image_to_array, MalformedImageError, UnsupportedEncodingError)
+    DEMOSAICED, Encoding, image_to_array, MalformedImageError, UnsupportedEncodingError)
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CompressedImage, Image
 
@@ -108,6 +110,27 @@ def read_compressed(msg: CompressedImage, stats: FrameStats) -> tuple[Any, Encod
                            f'{error} ({stats.frames_undecodable} so far)') from None
     stats.add_decode_time((time.perf_counter() - start) * 1e3)
     return decoded.pixels, decoded.encoding
+
+
+def demosaic_frame(pixels: Any, encoding: Encoding, demosaicer: Demosaicer, method: str,
+                   stats: FrameStats) -> tuple[Any, Encoding, str | None]:
+    """
+    Demosaic a Bayer frame (``encoding.bayer`` set) into ``rgb8`` / ``rgb16``.
+
+    :param pixels: the ``(H, W)`` mosaic (even sides: :func:`read_image` checked them).
+    :param encoding: its Bayer encoding.
+    :param demosaicer: the frame path's demosaicer (keeps the output buffer).
+    :param method: the ``debayer`` parameter.
+    :param stats: the frame counters.
+    :return: ``(rgb, encoding, note)``; ``note`` is a line to log once (16-bit VNG).
+    :raises FrameRefused: when OpenCV cannot demosaic it (counted in ``frames_failed``).
+    """
+    try:
+        rgb, note = demosaicer.demosaic(pixels, encoding.bayer, method)
+    except Exception as err:        # noqa: B902 - one bad frame must not stop the stream
+        stats.frames_failed += 1
+        raise FrameRefused('demosaic', f'{encoding.name} frame not demosaiced: {err}') from None
+    return rgb, DEMOSAICED[rgb.dtype], note
 
 
 #: The parameters of ``image_rect/compressed``, in the order :func:`compressed_settings` gives.

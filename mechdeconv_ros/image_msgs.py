@@ -19,9 +19,13 @@ message is reused frame after frame. Never assign a numpy array or a memoryview 
 docs/design.md section 4.4).
 
 Supported encodings (sensor_msgs/image_encodings.hpp names): ``mono8``, ``mono16``, ``rgb8``,
-``bgr8``, ``rgba8``, ``bgra8``, ``8UC1``, ``8UC3``, ``8UC4``, ``16UC1`` and ``32FC1``. The last
-two are depth images: the node corrects them with nearest-neighbour interpolation so that no
-depth value is invented between a foreground and a background pixel.
+``bgr8``, ``rgb16``, ``bgr16``, ``rgba8``, ``bgra8``, ``8UC1``, ``8UC3``, ``8UC4``, ``16UC1``
+and ``32FC1``. ``16UC1`` and ``32FC1`` are depth images: the node corrects them with
+nearest-neighbour interpolation so that no depth value is invented between a foreground and a
+background pixel. The Bayer mosaics ``bayer_rggb8``, ``bayer_bggr8``, ``bayer_gbrg8``,
+``bayer_grbg8`` and their ``16`` forms are read as one channel (``Encoding.bayer`` names the
+tile) and must have an even width and height; the node demosaics them
+(:mod:`mechdeconv_ros.debayer`) into ``rgb8`` / ``rgb16`` before the correction.
 """
 
 from __future__ import annotations
@@ -32,7 +36,7 @@ from dataclasses import dataclass
 import sys
 from typing import Any, TYPE_CHECKING
 
-from mechdeconv_ros.params import MAX_FRAME_PIXELS, MAX_SIDE_PX
+from mechdeconv_ros.params import BAYER_PATTERNS, MAX_FRAME_PIXELS, MAX_SIDE_PX
 import numpy as np
 import numpy.typing as npt
 from sensor_msgs.msg import CameraInfo, Image
@@ -73,13 +77,15 @@ class Encoding:
     How the pixels of one ``Image.encoding`` are laid out.
 
     ``depth`` marks depth images (16UC1 in mm, 32FC1 in m): they must be resampled with
-    nearest-neighbour interpolation.
+    nearest-neighbour interpolation. ``bayer`` names the 2x2 tile of a raw Bayer mosaic
+    (``'rggb'``, ...; empty for every other encoding).
     """
 
     name: str
     dtype: np.dtype
     channels: int
     depth: bool = False
+    bayer: str = ''
 
     @property
     def bytes_per_pixel(self) -> int:
@@ -87,8 +93,8 @@ class Encoding:
         return self.dtype.itemsize * self.channels
 
 
-def _enc(name: str, dtype: Any, channels: int, depth: bool = False) -> Encoding:
-    return Encoding(name, np.dtype(dtype), channels, depth)
+def _enc(name: str, dtype: Any, channels: int, depth: bool = False, bayer: str = '') -> Encoding:
+    return Encoding(name, np.dtype(dtype), channels, depth, bayer)
 
 
 #: The encodings the node corrects, by name.
@@ -97,6 +103,8 @@ ENCODINGS: dict[str, Encoding] = {e.name: e for e in (
     _enc('mono16', np.uint16, 1),
     _enc('rgb8', np.uint8, 3),
     _enc('bgr8', np.uint8, 3),
+    _enc('rgb16', np.uint16, 3),
+    _enc('bgr16', np.uint16, 3),
     _enc('rgba8', np.uint8, 4),
     _enc('bgra8', np.uint8, 4),
     _enc('8UC1', np.uint8, 1),
@@ -104,7 +112,12 @@ ENCODINGS: dict[str, Encoding] = {e.name: e for e in (
     _enc('8UC4', np.uint8, 4),
     _enc('16UC1', np.uint16, 1, depth=True),
     _enc('32FC1', np.float32, 1, depth=True),
+    *(_enc(f'bayer_{tile}{bits}', np.uint8 if bits == 8 else np.uint16, 1, bayer=tile)
+      for bits in (8, 16) for tile in BAYER_PATTERNS),
 )}
+
+#: The encoding a demosaiced Bayer frame is published in, by the mosaic's dtype.
+DEMOSAICED = {np.dtype(np.uint8): ENCODINGS['rgb8'], np.dtype(np.uint16): ENCODINGS['rgb16']}
 
 _SUPPORTED_TEXT = ', '.join(ENCODINGS)
 
@@ -122,8 +135,9 @@ def lookup_encoding(encoding: str) -> Encoding:
         return found
     lowered = encoding.lower()
     if lowered.startswith('bayer_'):
-        fix = ("it is raw Bayer mosaic data: debayer first, e.g. with image_proc's debayer "
-               'node (image_raw -> image_color/image_mono), and feed its output to this node')
+        fix = ('Bayer mosaics are read as bayer_rggb8, bayer_bggr8, bayer_gbrg8, bayer_grbg8 '
+               'and their 16-bit forms (lower case); for another tile or depth debayer first, '
+               "e.g. with image_proc's debayer node")
     elif lowered.startswith(('yuv', 'uyvy', 'yuyv', 'nv12', 'nv21')):
         fix = ('it is packed/planar YUV: convert it to rgb8, bgr8 or mono8 first (most camera '
                'drivers have an output-format parameter; otherwise a colour-conversion node)')
@@ -167,12 +181,16 @@ def image_to_array(msg: Image) -> tuple[npt.NDArray[Any], Encoding]:
     :return: ``(pixels, encoding)``; pixels has shape ``(height, width)`` for one channel,
         ``(height, width, channels)`` otherwise, and the encoding's dtype in native byte order.
     :raises UnsupportedEncodingError: for an encoding the node does not correct.
-    :raises MalformedImageError: for a zero or absurd size, ``step < width * bytes_per_pixel``
-        or ``data`` shorter than ``step * height``.
+    :raises MalformedImageError: for a zero or absurd size, ``step < width * bytes_per_pixel``,
+        ``data`` shorter than ``step * height`` or a Bayer mosaic of odd width or height.
     """
     enc = lookup_encoding(msg.encoding)
     width, height, step = int(msg.width), int(msg.height), int(msg.step)
     check_frame_size(width, height)
+    if enc.bayer and (width % 2 or height % 2):
+        raise MalformedImageError(
+            f'{msg.encoding} is {width}x{height}: a Bayer mosaic needs an even width and '
+            'height (whole 2x2 tiles)')
     row_bytes = width * enc.bytes_per_pixel
     if step < row_bytes:
         raise MalformedImageError(

@@ -49,11 +49,12 @@ from dataclasses import dataclass, field
 import math
 from typing import Any, Mapping
 
-from mechdeconv_ros import refusals
+from mechdeconv_ros import lateral_color, refusals
 from mechdeconv_ros.datasheet import is_table_mode, TableSource
 from mechdeconv_ros.equivalent import (
     boundary_points, choose_equivalent, EQUIVALENT_MAX_ERROR_PX, EquivalentFit, fit_equivalent)
 from mechdeconv_ros.illumination import Illumination
+from mechdeconv_ros.lateral_color import LateralColor
 from mechdeconv_ros.lens_params import make_prescription
 from mechdeconv_ros.lens_source import LensSource, source_from_values
 from mechdeconv_ros.model_base import FloatArray, half_diagonal_mm, ModelError, scene_distance
@@ -112,6 +113,21 @@ class LensModel:
     _summary_cache: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
     _illumination_cache: dict[bool, Illumination] = field(default_factory=dict, repr=False,
                                                           compare=False)
+    _lateral_cache: dict[str, LateralColor] = field(default_factory=dict, repr=False,
+                                                    compare=False)
+
+    def lateral_color(self) -> LateralColor:
+        """
+        Return the three colour channels traced to the sensor plane, computed on first use.
+
+        :return: :func:`mechdeconv_ros.lateral_color.trace_channels` of this model.
+        :raises ModelError: when the lens has no glass names or a glass does not cover a
+            channel's wavelength.
+        """
+        cached = self._lateral_cache.get('traces')
+        if cached is None:
+            cached = self._lateral_cache['traces'] = lateral_color.trace_channels(self)
+        return cached
 
     def illumination(self, with_fraction: bool = True) -> Illumination:
         """
@@ -207,6 +223,12 @@ class LensModel:
             90 deg, ``real_height_mm``), at most 257 samples.
         """
         out = dict(self.summary)
+        colour = None
+        if lateral_color.has_dispersion(self.values):
+            try:
+                colour = self.lateral_color().report(self)
+            except ModelError as err:
+                out['warnings'] = list(out['warnings']) + [f'lateral colour: {err}']
         try:
             illumination: dict[str, Any] | None = self.illumination().report()
         except ValueError as err:
@@ -225,6 +247,7 @@ class LensModel:
                                   for fit in self.equivalent_fits},
             'max_displacement_px': self.max_displacement_px,
             'relative_illumination': illumination,
+            'lateral_color': colour,
         })
         field = out.pop('_field_curve')
         theta, real = field['theta_rad'], field['real_mm']
@@ -356,6 +379,7 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
         raise ModelError('scene.distance_mm', str(err)) from None
     # The rules of every source (paraxial), then the ones on its surfaces (docs/design.md s. 7).
     refusals.check_focus_distance(vals, f, para.front_principal_z_mm)
+    lateral_color.check_switch(vals)
     warnings = source.check_physical(distance, sensor_z)
     w, h, ow, oh = _image_size(vals, width, height)
     px = float(vals['sensor.pixel_size_x_um']) * 1e-3
@@ -420,6 +444,8 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
         max_displacement_px=max_disp,
         interpolation=CV_INTERPOLATION[str(vals['output.interpolation'])],
         projection=projection, field_curve=coarse, warnings=tuple(warnings))
+    if vals['output.lateral_color_correction']:
+        model.lateral_color()       # its three traces: a channel no ray passes is refused now
     return model
 
 

@@ -40,6 +40,14 @@ IMAGE_TRANSPORTS = ('raw', 'compressed')
 
 #: Allowed values of ``output.interpolation`` and the OpenCV flag names they stand for.
 INTERPOLATIONS = ('nearest', 'linear', 'cubic', 'lanczos4')
+#: Allowed values of ``debayer``: OpenCV's demosaicing methods (mechdeconv_ros.debayer).
+DEBAYER_METHODS = ('bilinear', 'edge_aware', 'vng')
+#: image_proc's default: its debayer node declares ``debayer`` = 3, VNG (ros-perception/
+#: image_pipeline, image_proc/src/debayer.cpp and include/image_proc/debayer.hpp).
+DEFAULT_DEBAYER = 'vng'
+#: The Bayer tiles the node demosaics, named as the ROS bayer_* encodings (top-left pixel
+#: first, row by row).
+BAYER_PATTERNS = ('rggb', 'bggr', 'gbrg', 'grbg')
 
 
 @dataclass(frozen=True)
@@ -168,6 +176,10 @@ SCHEMA: tuple[ParamSpec, ...] = (
     *(_a(f'lens.surfaces.asphere_a{p}', f'mm^{1 - p}',
          f'Prescription mode: asphere term a{p} r^{p} of each surface; empty = all 0.',
          -1.0e6, 1.0e6) for p in ASPHERE_POWERS),
+    ParamSpec('lens.channel_wavelengths_nm', 'double_array', [610.0, 550.0, 465.0], 'nm',
+              'Wavelengths [R, G, B] of the colour channels. output.lateral_color_correction '
+              "traces each channel at its own (defaults: the centroids of a typical sensor's "
+              'colour filters).', 200.0, 2500.0),
     # --- lens: datasheet table (non-empty arrays select datasheet mode) ---
     _a('lens.datasheet.field_angle_deg', 'deg',
        'Datasheet mode: field angles of the image height table; strictly increasing from the '
@@ -220,6 +232,13 @@ SCHEMA: tuple[ParamSpec, ...] = (
               'Divide image_rect by the relative illumination traced through the lens '
               '(brighter corners, a flat white wall stays flat); false = a purely geometric '
               'rectification. Depth images (16UC1, 32FC1) are never gain-corrected.'),
+    ParamSpec('output.lateral_color_correction', 'bool', False, '',
+              'Correct lateral colour: remap R, G and B each by the chief rays traced at its '
+              'own wavelength (lens.channel_wavelengths_nm) to the one sensor plane, so the '
+              'three channels register on the corrected image (same K_new and camera_info). '
+              'Needs the glass names (lens.surfaces.glass, or lens.glass for the thick lens). '
+              'rgb8/bgr8/rgb16/bgr16/rgba8/bgra8 and demosaiced Bayer frames only: mono, '
+              '8UC3/8UC4 and depth images ignore it (logged once).'),
     _d('output.max_vignetting_gain', 4.0, '1',
        'Largest gain of the vignetting correction; where the relative illumination is below '
        '1 / this the corrected field ends (black).', 1.0, 1.0e3),
@@ -236,6 +255,13 @@ SCHEMA: tuple[ParamSpec, ...] = (
               '(sensor_msgs/Image); compressed subscribes the resolved image_raw + '
               '/compressed (sensor_msgs/CompressedImage, JPEG or PNG as image_transport '
               'writes it) and decodes every frame.', choices=IMAGE_TRANSPORTS, read_only=True),
+    ParamSpec('debayer', 'string', DEFAULT_DEBAYER, '',
+              'Demosaicing of Bayer input, published as rgb8 / rgb16. The node reads '
+              'bayer_rggb8, bayer_bggr8, bayer_gbrg8, bayer_grbg8 and their 16-bit forms and '
+              "demosaics them with OpenCV's bilinear, edge_aware (EA) or vng. Default vng, as "
+              "image_proc's debayer node (ros-perception/image_pipeline image_proc/src/"
+              'debayer.cpp declares debayer = 3, VNG). OpenCV has no 16-bit VNG: 16-bit '
+              'mosaics then use edge_aware (logged once).', choices=DEBAYER_METHODS),
     # --- image_rect/compressed output (image_transport's parameter names) ---
     ParamSpec('image_rect.compressed.format', 'string', 'jpeg', '',
               'Codec of image_rect/compressed (sensor_msgs/CompressedImage, published only '

@@ -27,10 +27,13 @@ images on first use (no invented depths).
 
 from __future__ import annotations
 
-from typing import Any
+import time
+from typing import Any, Sequence
 
 import cv2
+from mechdeconv_ros.channel_remap import ChannelRemap
 from mechdeconv_ros.illumination import Illumination
+from mechdeconv_ros.lateral_color import channel_model
 from mechdeconv_ros.model import LensModel
 import numpy as np
 import numpy.typing as npt
@@ -172,6 +175,12 @@ def _build_maps(model: LensModel, gain_table: npt.NDArray[np.float64] | None
     return map_x, map_y, gain
 
 
+def _same_curve(a: Any, b: Any) -> bool:
+    """Return True when two radial maps are the same samples."""
+    return bool(a.ideal_mm.shape == b.ideal_mm.shape and np.array_equal(a.real_mm, b.real_mm)
+                and np.array_equal(a.ideal_mm, b.ideal_mm))
+
+
 class Rectifier:
     """
     The maps of one LensModel, built once, and the per-frame correction.
@@ -183,10 +192,16 @@ class Rectifier:
     output coordinates, :func:`build_gain_map`) and ``correct`` multiplies the remapped frame
     by it in place (cv2.multiply saturates integer images). ``vignetting_warning`` says, once
     per model, where the gain limit ends the corrected field.
+
+    With ``output.lateral_color_correction`` it also holds one map per colour channel
+    (:attr:`colour`, :mod:`mechdeconv_ros.lateral_color`), and ``correct`` given the
+    frame's channel colours (``colours``) remaps each channel with its own map in one pass
+    (:class:`~mechdeconv_ros.channel_remap.ChannelRemap`); ``lateral_color_ms`` is the time
+    of its three traces and maps.
     """
 
     def __init__(self, model: LensModel, vignetting: bool | None = None,
-                 fixed_point: bool = False) -> None:
+                 fixed_point: bool = False, lateral: bool | None = None) -> None:
         """
         Build the float maps (``map1`` = x, ``map2`` = y, CV_32FC1, raw-image pixels).
 
@@ -194,6 +209,7 @@ class Rectifier:
         :param vignetting: build the vignetting gain map; None = ``output.vignetting_correction``.
         :param fixed_point: convert the maps to CV_16SC2 + CV_16UC1 (the same output; the
             stage benchmark compares the two forms in a running relay).
+        :param lateral: build the per-channel maps; None = ``output.lateral_color_correction``.
         """
         self.model = model
         if vignetting is None:
@@ -213,10 +229,24 @@ class Rectifier:
                     f'inside the {curve.corner_height_mm:.3g} mm corner: the corrected field '
                     'ends there (black beyond)')
         self.map1, self.map2, self.gain = _build_maps(model, table)
+        float_maps = (self.map1, self.map2)
         if fixed_point:
             self.map1, self.map2 = cv2.convertMaps(self.map1, self.map2, cv2.CV_16SC2)
         self._nearest_map: np.ndarray | None = None
         self._gains: dict[int, Map] = {}
+        # --- lateral colour (issue #20): a map per colour channel, on the same K_new ---
+        self.colour: ChannelRemap | None = None
+        self.lateral_color_ms = 0.0
+        if lateral is None:
+            lateral = bool(model.values.get('output.lateral_color_correction', False))
+        if lateral:
+            start = time.perf_counter()
+            # A channel at the focus wavelength has the model's own curve: reuse its maps.
+            maps = [float_maps if _same_curve(channel.curve, model.curve)
+                    else build_float_maps(channel_model(model, channel))
+                    for channel in model.lateral_color().channels]
+            self.colour = ChannelRemap(maps, model.width, model.height)
+            self.lateral_color_ms = (time.perf_counter() - start) * 1e3
 
     def gain_for(self, channels: int) -> Map | None:
         """
@@ -258,8 +288,18 @@ class Rectifier:
         """Return ``(out_height, out_width)``."""
         return self.model.out_height, self.model.out_width
 
+    def prepare_colours(self, colours: Sequence[int] | None) -> None:
+        """
+        Build the folded per-channel maps for a channel order now (rebuild time).
+
+        :param colours: the colour of each channel (``lateral_color.COLOUR_ORDER``), or None.
+        """
+        if self.colour is not None and colours:
+            self.colour.prepare(colours, self.model.interpolation == cv2.INTER_NEAREST)
+
     def correct(self, src: np.ndarray, dst: np.ndarray | None = None, *,
-                nearest: bool = False, gain: bool = True) -> np.ndarray:
+                nearest: bool = False, gain: bool = True,
+                colours: Sequence[int] | None = None) -> np.ndarray:
         """
         Correct one frame.
 
@@ -270,6 +310,9 @@ class Rectifier:
         :param nearest: use nearest-neighbour regardless of the model's interpolation (depth).
         :param gain: apply the vignetting gain when the Rectifier has one; False for depth
             images, which are never gain-corrected.
+        :param colours: the colour (0 R, 1 G, 2 B) of each channel of ``src``; with lateral
+            colour correction each channel is remapped with its colour's map. None (mono,
+            depth, unknown order): one map for every channel.
         :return: the corrected image (``dst`` when given). Pixels outside the valid field or
             the source are 0.
         :raises ValueError: when ``src`` does not have the model's size.
@@ -277,7 +320,9 @@ class Rectifier:
         if src.shape[:2] != (self.model.height, self.model.width):
             raise ValueError(f'frame is {src.shape[1]}x{src.shape[0]} px but the model is '
                              f'{self.model.width}x{self.model.height} px')
-        if nearest or self.model.interpolation == cv2.INTER_NEAREST:
+        if colours and self.colour is not None and not nearest and src.ndim == 3:
+            out = self.colour.remap(src, colours, self.model.interpolation, dst)
+        elif nearest or self.model.interpolation == cv2.INTER_NEAREST:
             out = cv2.remap(src, self.nearest_map, None, cv2.INTER_NEAREST, dst=dst,
                             borderMode=cv2.BORDER_CONSTANT, borderValue=0)
         else:

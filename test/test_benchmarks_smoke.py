@@ -167,3 +167,15 @@ def test_report_imports_no_benchmark():
             if node.module == 'benchmarks':
                 imported |= {f'benchmarks.{alias.name}' for alias in node.names}
     assert not {name for name in imported if name.startswith('benchmarks')}, imported
+
+
+def test_colour_benchmark_quick(tmp_path):
+    from benchmarks import colour
+    doc = colour.run(tmp_path, quick=True)
+    saved = json.loads((tmp_path / 'colour.json').read_text())
+    frame = saved['per_frame']['320x240']
+    assert frame['single']['median_ms'] > 0 and frame['lateral']['median_ms'] > 0
+    assert set(frame['bayer_over_rgb8']) == {'bilinear', 'edge_aware', 'vng'}
+    assert doc['rebuild']['trace_ms'] > 0
+    assert doc['rebuild']['max_rb_separation_px'] == pytest.approx(4.11, abs=0.02)   # at 1080p
+    assert any('map per channel' in line for line in colour.tables(doc))

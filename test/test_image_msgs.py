@@ -47,8 +47,10 @@ def make_image(pixels: np.ndarray, encoding: str, *, pad: int = 0,
 
 
 def random_pixels(encoding: str, height: int = 7, width: int = 5) -> np.ndarray:
-    """Return seeded random pixels of the encoding's dtype and channel count."""
+    """Return seeded random pixels of the encoding's dtype and channel count (Bayer: even)."""
     enc = ENCODINGS[encoding]
+    if enc.bayer:
+        height, width = height + height % 2, width + width % 2
     rng = np.random.default_rng(RNG_SEED)
     shape: tuple[int, ...] = (height, width)
     if enc.channels > 1:
@@ -120,8 +122,8 @@ def test_big_endian_flag_on_8_bit_image_needs_no_copy() -> None:
 
 
 @pytest.mark.parametrize(('encoding', 'expected'), [
-    ('bayer_rggb8', 'debayer'),
-    ('bayer_grbg16', 'debayer'),
+    ('bayer_rgbg8', 'debayer'),
+    ('bayer_grbg12', 'debayer'),
     ('yuv422', 'YUV'),
     ('yuv422_yuy2', 'YUV'),
     ('16SC1', 'Supported'),
@@ -138,9 +140,37 @@ def test_unsupported_encoding_names_it_and_the_fix(encoding: str, expected: str)
     assert info.value.encoding == encoding
 
 
-def test_bayer_message_points_to_image_proc() -> None:
-    with pytest.raises(UnsupportedEncodingError, match="image_proc's debayer"):
-        lookup_encoding('bayer_rggb8')
+def test_unknown_bayer_message_names_the_read_ones_and_image_proc() -> None:
+    with pytest.raises(UnsupportedEncodingError, match="image_proc's debayer") as info:
+        lookup_encoding('BAYER_RGGB8')
+    assert 'bayer_rggb8' in str(info.value)
+
+
+@pytest.mark.parametrize('encoding', [f'bayer_{t}{b}' for b in (8, 16)
+                                      for t in ('rggb', 'bggr', 'gbrg', 'grbg')])
+def test_bayer_encodings_are_read_as_one_channel_mosaics(encoding: str) -> None:
+    enc = lookup_encoding(encoding)
+    assert enc.channels == 1 and enc.bayer == encoding[6:10]
+    assert enc.dtype == (np.uint8 if encoding.endswith('8') else np.uint16)
+    assert not enc.depth
+    pixels = random_pixels(encoding, height=6, width=8)
+    view, _ = image_to_array(make_image(pixels, encoding, pad=4))
+    npt.assert_array_equal(view, pixels)
+
+
+@pytest.mark.parametrize(('width', 'height'), [(7, 6), (8, 5), (1, 1)],
+                         ids=['odd-width', 'odd-height', 'one-pixel'])
+def test_bayer_mosaic_of_odd_size_is_malformed(width: int, height: int) -> None:
+    msg = make_image(np.zeros((height, width), np.uint8), 'bayer_rggb8')
+    with pytest.raises(MalformedImageError, match='even width and height'):
+        image_to_array(msg)
+
+
+def test_short_bayer_buffer_is_malformed() -> None:
+    msg = make_image(np.zeros((6, 8), np.uint16), 'bayer_gbrg16')
+    del msg.data[-3:]
+    with pytest.raises(MalformedImageError, match='less than step'):
+        image_to_array(msg)
 
 
 def _malformed(**fields: Any) -> Image:
@@ -171,7 +201,7 @@ def test_data_longer_than_needed_is_accepted() -> None:
     npt.assert_array_equal(view, pixels)
 
 
-@pytest.mark.parametrize('encoding', sorted(ENCODINGS))
+@pytest.mark.parametrize('encoding', sorted(e for e in ENCODINGS if not ENCODINGS[e].bayer))
 def test_output_image_is_written_in_place(encoding: str) -> None:
     out = new_output_image(9, 6, encoding)
     enc = ENCODINGS[encoding]
@@ -203,7 +233,7 @@ def test_pool_reuses_and_evicts() -> None:
 def test_pool_refuses_bad_requests() -> None:
     pool = OutputImagePool()
     with pytest.raises(UnsupportedEncodingError):
-        pool.get(4, 3, 'bayer_rggb8')
+        pool.get(4, 3, 'yuv422')
     with pytest.raises(MalformedImageError):
         pool.get(0, 3, 'mono8')
 

@@ -275,7 +275,7 @@ def test_refused_frames_are_counted_and_the_next_good_one_is_corrected(
         harness: Harness, outputs: Outputs) -> None:
     width, height = SMALL
     before = harness.diag()
-    bayer = make_image(test_pattern(width, height), 'bayer_rggb8')
+    bayer = make_image(test_pattern(width, height), 'bayer_rgbg8')
     harness.expect_no_output(outputs, bayer)
     good = make_image(test_pattern(width, height), 'mono8')
     harness.exchange(outputs, good)
@@ -285,10 +285,10 @@ def test_refused_frames_are_counted_and_the_next_good_one_is_corrected(
     harness.exchange(outputs, make_image(test_pattern(width, height), 'mono8'))
     after = harness.diag()
     assert int(after['rejected_encodings']) > int(before['rejected_encodings'])
-    assert after['last_rejected_encoding'] == 'bayer_rggb8'
+    assert after['last_rejected_encoding'] == 'bayer_rgbg8'
     assert int(after['frames_failed']) > int(before['frames_failed'])
     log = harness.proc.output()
-    assert "unsupported image encoding 'bayer_rggb8'" in log and 'debayer' in log
+    assert "unsupported image encoding 'bayer_rgbg8'" in log and 'debayer' in log
     assert 'less than step' in log
     assert harness.proc.running()
 

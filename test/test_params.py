@@ -45,6 +45,9 @@ def test_issue_contract_names_are_declared():
     contract += ['lens.glass', 'lens.wavelength_nm', 'lens.surfaces.glass',
                  'lens.image_distance_mm', 'lens.datasheet.field_angle_deg',
                  'lens.datasheet.image_height_mm', 'lens.datasheet.relative_illumination']
+    # Issue 20: lateral colour (debayer is a node parameter: no model change).
+    contract += ['output.lateral_color_correction', 'lens.channel_wavelengths_nm']
+    assert 'debayer' in params.SPECS and 'debayer' not in params.MODEL_PARAMS
     assert set(contract) <= set(params.SPECS)
     assert set(contract) == set(params.MODEL_PARAMS)
 

@@ -715,8 +715,8 @@ def test_an_unusual_lens_is_accepted_and_its_warning_logged_once(strict: Link) -
 #: Bytes per pixel of the supported encodings.
 BPP = {'mono8': 1, 'mono16': 2, 'rgb8': 3, 'bgr8': 3, 'rgba8': 4, 'bgra8': 4, '8UC1': 1,
        '8UC3': 3, '8UC4': 4, '16UC1': 2, '32FC1': 4}
-UNKNOWN_ENCODINGS = ('bayer_rggb8', 'bayer_grbg16', 'yuv422', 'yuv422_yuy2', 'uyvy', 'nv12',
-                     'jpeg', 'png', 'compressed', '', 'RGB8', 'Mono8', 'rgb16', '8UC2', '16SC1',
+UNKNOWN_ENCODINGS = ('bayer_rgbg8', 'bayer_grbg12', 'yuv422', 'yuv422_yuy2', 'uyvy', 'nv12',
+                     'jpeg', 'png', 'compressed', '', 'RGB8', 'Mono8', 'rgb32', '8UC2', '16SC1',
                      '64FC1', '32FC3', 'mono12', 'rgb8 ', ' mono8', 'rgb８', 'bgr8;jpeg')
 
 
