@@ -25,6 +25,11 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 
+#: The ROS type of each array type of the schema (declared statically typed).
+_ARRAY_TYPES = {'double_array': Parameter.Type.DOUBLE_ARRAY,
+                'integer_array': Parameter.Type.INTEGER_ARRAY}
+
+
 def descriptor_for(spec: ParamSpec) -> ParameterDescriptor:
     """
     Turn a schema entry into the ParameterDescriptor that ``ros2 param describe`` shows.
@@ -52,7 +57,7 @@ def descriptor_for(spec: ParamSpec) -> ParameterDescriptor:
     constraints = []
     if spec.choices:
         constraints.append('One of: ' + ', '.join(spec.choices) + '.')
-    if spec.type == 'double_array' and (low is not None or high is not None):
+    if spec.type in ('double_array', 'integer_array') and (low is not None or high is not None):
         constraints.append(f'Every element in [{low:g}, {high:g}] {spec.unit}.'.replace(
             ' 1.', '.'))
     descriptor.additional_constraints = ' '.join(constraints)
@@ -73,8 +78,9 @@ def declare_schema(node: Node, specs: Iterable[ParamSpec],
     """
     Declare schema parameters with their descriptors and return their checked start-up values.
 
-    Double arrays are declared statically typed, since rclpy cannot infer a type from ``[]``
-    (it would make a BYTE_ARRAY), and set to ``[]`` when no override gave them a value.
+    Double and integer arrays are declared statically typed, since rclpy cannot infer a type
+    from ``[]`` (it would make a BYTE_ARRAY), and set to ``[]`` when no override gave them a
+    value.
 
     :param node: the node to declare on.
     :param specs: the specs to declare.
@@ -87,8 +93,8 @@ def declare_schema(node: Node, specs: Iterable[ParamSpec],
     errors = []
     for spec in specs:
         default = defaults.get(spec.name, spec.default)
-        if spec.type == 'double_array' and not default:
-            default = Parameter.Type.DOUBLE_ARRAY
+        if spec.type in _ARRAY_TYPES and not default:
+            default = _ARRAY_TYPES[spec.type]
         try:
             node.declare_parameter(spec.name, default, descriptor_for(spec))
         except InvalidParameterTypeException as err:
@@ -97,8 +103,8 @@ def declare_schema(node: Node, specs: Iterable[ParamSpec],
             errors.append(f'{spec.name}: {err}')
     if errors:
         raise ValueError('invalid start-up parameters:\n  ' + '\n  '.join(errors))
-    unset = [Parameter(spec.name, Parameter.Type.DOUBLE_ARRAY, [])
-             for spec in specs if spec.type == 'double_array'
+    unset = [Parameter(spec.name, _ARRAY_TYPES[spec.type], [])
+             for spec in specs if spec.type in _ARRAY_TYPES
              and node.get_parameter_or(spec.name).type_ == Parameter.Type.NOT_SET]
     if unset:
         node.set_parameters(unset)

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from mechdeconv_ros import params
 import pytest
+import yaml
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
 
@@ -17,7 +18,8 @@ def test_schema_is_consistent():
     names = [spec.name for spec in params.SCHEMA]
     assert len(names) == len(set(names))
     for spec in params.SCHEMA:
-        assert spec.type in ('double', 'integer', 'string', 'bool', 'double_array')
+        assert spec.type in ('double', 'integer', 'string', 'bool', 'double_array',
+                             'integer_array')
         assert spec.description.endswith('.'), spec.name
         # Every default passes its own checks.
         assert params.coerce(spec, spec.default) == spec.default
@@ -40,6 +42,9 @@ def test_issue_contract_names_are_declared():
     # Issue 11: aspheric surfaces.
     contract += ['lens.surfaces.conic', 'output.projection'] + [
         f'lens.surfaces.asphere_a{p}' for p in (4, 6, 8, 10, 12, 14, 16)]
+    # Issue 19: moving groups.
+    contract += [f'lens.{m}.{k}' for m in ('zoom', 'focus')
+                 for k in ('joint', 'positions', 'surfaces', 'thickness_mm')]
     assert set(contract) <= set(params.SPECS)
     assert set(contract) == set(params.MODEL_PARAMS)
 
@@ -105,3 +110,14 @@ def test_params_file_sections(tmp_path):
     path.write_text('just: text\n')
     with pytest.raises(ValueError, match='ros__parameters'):
         params.load_params_file(path)
+
+
+def test_integer_arrays_coerce_and_write_back():
+    spec = params.SPECS['lens.zoom.surfaces']
+    assert params.coerce(spec, [4, 9.0]) == [4, 9]
+    for bad, words in (([4.5], 'expected an integer'), ([300], '300 is above the maximum'),
+                       ([-1], '-1 is below the minimum'), (['4'], 'expected a number')):
+        with pytest.raises(ValueError, match=r'lens\.zoom\.surfaces\[0\]: ' + words):
+            params.coerce(spec, bad)
+    text = params.to_params_yaml({'lens.zoom.surfaces': [4, 9]})
+    assert yaml.safe_load(text)['/**']['ros__parameters']['lens']['zoom']['surfaces'] == [4, 9]

@@ -332,7 +332,8 @@ def param_msg(name: str, value: Any, type_: Parameter.Type | None = None) -> Par
 
 _ROS_TYPE = {'double': Parameter.Type.DOUBLE, 'integer': Parameter.Type.INTEGER,
              'string': Parameter.Type.STRING, 'bool': Parameter.Type.BOOL,
-             'double_array': Parameter.Type.DOUBLE_ARRAY}
+             'double_array': Parameter.Type.DOUBLE_ARRAY,
+             'integer_array': Parameter.Type.INTEGER_ARRAY}
 
 
 def wrong_typed(rng: np.random.Generator, name: str, declared: Parameter.Type) -> ParameterMsg:

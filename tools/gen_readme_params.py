@@ -56,6 +56,8 @@ def format_default(spec: ParamSpec) -> str:
         return text if any(c in text for c in '.e') else text + '.0'
     if spec.type == 'double_array':
         return '[' + ', '.join(_number(float(v)) for v in value) + ']'
+    if spec.type == 'integer_array':
+        return '[' + ', '.join(str(int(v)) for v in value) + ']'
     return str(value)
 
 
@@ -72,7 +74,7 @@ def format_range(spec: ParamSpec) -> str:
         return '-'
     low = '-inf' if spec.minimum is None else _number(spec.minimum)
     high = 'inf' if spec.maximum is None else _number(spec.maximum)
-    prefix = 'each ' if spec.type == 'double_array' else ''
+    prefix = 'each ' if spec.type in ('double_array', 'integer_array') else ''
     return f'{prefix}{low} to {high}'
 
 
