@@ -56,7 +56,7 @@ from dataclasses import dataclass
 import math
 from typing import Any, Mapping
 
-from mechdeconv_ros.raytrace import image_plane, paraxial, Prescription
+from mechdeconv_ros.prescription import image_plane, paraxial, Prescription
 from mechdeconv_ros.trace3d import (
     direction_from_cosines, FAILED, lens_system, reversed_system, System, trace_margin,
     trace_pass)

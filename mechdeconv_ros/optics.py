@@ -36,7 +36,7 @@ from __future__ import annotations
 import math
 from typing import Callable, Mapping
 
-from mechdeconv_ros.raytrace import AFOCAL_POWER_PER_MM, finite_number, Prescription, Surface
+from mechdeconv_ros.prescription import AFOCAL_POWER_PER_MM, finite_number, Prescription, Surface
 
 
 def _lens(n: float, r1_mm: float, r2_mm: float,

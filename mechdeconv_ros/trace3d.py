@@ -39,7 +39,7 @@ import dataclasses
 from dataclasses import dataclass
 from typing import NamedTuple
 
-from mechdeconv_ros.raytrace import Prescription, Surface, vertex_z
+from mechdeconv_ros.prescription import Prescription, Surface, vertex_z
 from mechdeconv_ros.surfaces import intersect, refract
 import numpy as np
 

@@ -328,9 +328,10 @@ def test_the_strategies_reach_the_accepted_space(kind):
 ], ids=['focus', 'edge', 'hemisphere', 'stop', 'circle'])
 def test_the_independent_checks_catch_what_the_model_refuses(monkeypatch, values, words):
     """With the model's own checks switched off, physical_violations finds each bad case."""
-    from mechdeconv_ros import model as model_module
-    monkeypatch.setattr(model_module, '_check_physical', lambda *args: [])
-    monkeypatch.setattr(model_module, '_check_circle_of_confusion', lambda *args: None)
+    from mechdeconv_ros import refusals
+    monkeypatch.setattr(refusals, 'check_focus_distance', lambda *args: None)
+    monkeypatch.setattr(refusals, 'check_surfaces', lambda *args: [])
+    monkeypatch.setattr(refusals, 'check_circle_of_confusion', lambda *args: None)
     try:
         model = build_model({'sensor.width_px': 640, 'sensor.height_px': 480, **values})
     except ModelError as err:       # refused later on by the trace: nothing to check

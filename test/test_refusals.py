@@ -250,7 +250,7 @@ def test_rim_and_sag_of_conics_and_aspheres():
     """The rim and sag helpers read conic and asphere terms when a surface has them."""
     from types import SimpleNamespace
 
-    from mechdeconv_ros.model import _sag
+    from mechdeconv_ros.refusals import _sag
     from mechdeconv_ros.surfaces import domain_limit_mm as _rim_mm
 
     def surface(radius, conic=0.0, asphere=()):
