@@ -45,6 +45,7 @@ from mechdeconv_ros.illumination import Illumination
 from mechdeconv_ros.lens_params import make_prescription, tolerance_keys, with_overrides
 from mechdeconv_ros.model_base import (
     FloatArray, is_prescription_mode, lens_param, ModelError, stop_param)
+from mechdeconv_ros.params import MECHANISMS
 from mechdeconv_ros.prescription import image_plane, Paraxial, paraxial, Prescription, Surface
 from mechdeconv_ros.raytrace import trace_field
 
@@ -286,10 +287,16 @@ def source_from_values(values: Mapping[str, Any]) -> LensSource:
     Return the lens source the ``lens.*`` parameters describe.
 
     :param values: checked parameter values.
-    :return: a :class:`PrescriptionSource` when ``lens.surfaces.radius_mm`` is given, else a
+    :return: a :class:`PrescriptionSource` when ``lens.surfaces.radius_mm`` is given (a
+        :class:`~mechdeconv_ros.moving_source.MovingSource` at its tables' first rows when a
+        ``lens.zoom.joint`` or ``lens.focus.joint`` moves gaps), else a
         :class:`ThickLensSource`.
     :raises ModelError: when the values describe no lens that focuses.
     """
+    if any(values.get(f'lens.{m}.joint') for m in MECHANISMS):
+        # Imported here: that module subclasses PrescriptionSource from this one.
+        from mechdeconv_ros.moving_source import MovingSource
+        return MovingSource(values)
     if is_prescription_mode(values):
         return PrescriptionSource(values)
     return ThickLensSource(values)

@@ -55,7 +55,7 @@ from mechdeconv_ros.equivalent import (
 from mechdeconv_ros.illumination import Illumination
 from mechdeconv_ros.lens_params import make_prescription
 from mechdeconv_ros.lens_source import LensSource, source_from_values
-from mechdeconv_ros.model_base import FloatArray, ModelError, scene_distance
+from mechdeconv_ros.model_base import FloatArray, ModelError
 from mechdeconv_ros.params import check_values, INTERPOLATIONS, MAX_FRAME_PIXELS, ParamValue
 from mechdeconv_ros.prescription import Prescription
 from mechdeconv_ros.radial_map import (
@@ -326,27 +326,8 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
         raise ModelError(name, str(err).split(':', 1)[-1].strip()) from None
     if source is None:
         source = source_from_values(vals)
-    para = source.first_order()
-    f = para.efl_mm
-    if f <= 0.0:
-        raise ModelError(source.lens_parameter,
-                         f'the lens diverges (f = {f:.4g} mm): it forms no real image of the '
-                         'scene on a sensor')
-    distance = scene_distance(vals)
-    if distance <= f:
-        raise ModelError('scene.distance_mm',
-                         f'{distance:g} mm is inside the focal length {f:.4g} mm: the lens '
-                         'forms no real image of it')
-    if math.isfinite(distance) and para.front_principal_z_mm - distance >= 0.0:
-        raise ModelError('scene.distance_mm',
-                         f'{distance:g} mm from the front principal plane puts the scene inside '
-                         'the lens')
-    try:
-        sensor_z, v = source.image_plane(distance)
-    except ValueError as err:
-        raise ModelError('scene.distance_mm', str(err)) from None
     # The rules of every source (paraxial), then the ones on its surfaces (docs/design.md s. 7).
-    refusals.check_focus_distance(vals, f, para.front_principal_z_mm)
+    f, distance, sensor_z, v = refusals.check_first_order(vals, source)
     warnings = source.check_physical(distance, sensor_z)
     w, h, ow, oh = _image_size(vals, width, height)
     px = float(vals['sensor.pixel_size_x_um']) * 1e-3

@@ -163,3 +163,27 @@ def test_probe_positions_are_rows_and_mid_rows(zoom_values):
     assert probes.size == 33 and np.all(np.diff(probes) > 0)
     assert_allclose(probes[::2], zoom.positions)
     assert zoom.step == pytest.approx(0.0625)
+
+
+def test_model_of_a_moving_lens_and_a_refused_row(zoom_values):
+    # The seam: a moving lens is a lens source at a state, checked at every reachable state.
+    from mechdeconv_ros.model import build_model, ModelError
+    from mechdeconv_ros.moving_source import MovingSource
+
+    model = build_model(zoom_values, 320, 180)
+    assert isinstance(model.source, MovingSource) and model.source.state == {'zoom': 0.0}
+    assert model.focal_length_mm == pytest.approx(57.206, abs=1e-3)
+    long_end = build_model(zoom_values, 320, 180, source=MovingSource(zoom_values,
+                                                                      {'zoom': 1.0}))
+    assert long_end.focal_length_mm == pytest.approx(143.03, abs=1e-2)
+    values = dict(zoom_values)
+    table = list(values['lens.zoom.thickness_mm'])
+    table[24:27] = [1.86, 500.0, 16.55]        # row 8: the variator 500 mm from the compensator
+    values['lens.zoom.thickness_mm'] = table
+    with pytest.raises(ModelError) as err:
+        build_model(values, 320, 180)
+    assert err.value.parameter == 'lens.zoom.thickness_mm'
+    assert 'between rows 7 and 8' in str(err.value) and 'wider than the surfaces' in str(err.value)
+    values['lens.zoom.surfaces'] = [4, 9, 30]
+    with pytest.raises(ModelError, match=r'^lens\.zoom\.surfaces: 30 is not an index'):
+        build_model(values, 320, 180)

@@ -28,7 +28,8 @@ def lens():
     values = dict(load_params_file(CONFIG / 'zoom.yaml'))
     values['lens.zoom.positions'] = values['lens.zoom.positions'][:3]
     values['lens.zoom.thickness_mm'] = values['lens.zoom.thickness_mm'][:9]
-    values.update({'sensor.pixel_size_x_um': 100.0, 'sensor.pixel_size_y_um': 100.0})
+    values.update({'sensor.pixel_size_x_um': 100.0, 'sensor.pixel_size_y_um': 100.0,
+                   'sensor.width_px': 0, 'sensor.height_px': 0})
     values = check_values(values)
     moving = lens_table.mechanisms(values)
     grid = build_moving_maps(values, moving, lambda v: build_model(v, W, H), step=2)

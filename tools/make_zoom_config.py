@@ -11,8 +11,9 @@ nikon-zoom.fx, which cites that page): 22 surfaces, three air gaps that move (af
 4, 9 and 12; given at the short, middle and long ends), the iris (surface 17) in the fixed
 rear group. The three gaps add up to 55.34 mm in every row (the front and rear groups do not
 move), which this script checks. As tabulated the lens has f = 57.2 to 143.0 mm (the 2.5x
-ratio of the title; the table is scaled by 0.715), so the sensor is scaled likewise (12.5 um
-pixels: 24 x 13.5 mm at 1920 x 1080, a 27 deg diagonal at the short end, the design's 30).
+ratio of the title; the table is scaled by 0.715), so the sensor is scaled likewise (24 x
+13.5 mm: 960 x 540 pixels of 25 um, or 1920 x 1080 of 12.5 um; a 27 deg diagonal at the
+short end, the design's 30).
 
 The patent gives three positions; a zoom motor passes through every position in between,
 where the compensator keeps the image plane fixed. The cam is rebuilt from the design: the
@@ -148,7 +149,7 @@ def main() -> None:
 # move (after surfaces 4, 9 and 12). The joint "zoom" runs from 0.0 (short) to 1.0 (long): the
 # variator gap moves linearly with it and the compensator gap is solved at {ROWS} positions so
 # that the image plane stays fixed (tools/make_zoom_config.py, which checks it against the
-# patent's rows). Sensor: 12.5 um pixels (24 x 13.5 mm at 1920 x 1080); scene at infinity.
+# patent's rows). Sensor: 24 x 13.5 mm, 960 x 540 pixels of 25 um; scene at infinity.
 # No focus table: the source gives none (lens.focus.joint stays '').
 /**:
   ros__parameters:
@@ -166,8 +167,10 @@ def main() -> None:
         surfaces: {list(GAPS)}
         thickness_mm: [{', '.join(f'{g:.4f}' for row in rows for g in row)}]
     sensor:
-      pixel_size_x_um: 12.5
-      pixel_size_y_um: 12.5
+      pixel_size_x_um: 25.0
+      pixel_size_y_um: 25.0
+      width_px: 960
+      height_px: 540
     scene:
       distance_mm: 0.0
 """
