@@ -1,7 +1,7 @@
 # Copyright 2026 The mechdeconv_ros Authors.
 # SPDX-License-Identifier: Apache-2.0
 """
-A pass-through node: the transport-only baseline of the node benchmark.
+A pass-through node: the transport-only baseline of the node benchmarks, and its ablations.
 
 It does what ``correct_node`` does minus the correction: subscribes ``image_raw`` and
 publishes every frame it receives on ``image_rect``, with the same QoS (best effort, keep
@@ -10,40 +10,135 @@ process environment decides it). The received message is republished as it is, s
 Python side adds no copy: what remains is rclpy's receive conversion, the executor and the
 publish, the cost every Python relay pays per frame.
 
+``--upto`` adds correct_node's per-frame work one stage at a time, with the node's own code
+(the stage benchmark, :mod:`benchmarks.stages`, runs each rung):
+
+* ``relay`` (default): republish the received message;
+* ``copy``: read the pixels (:func:`~mechdeconv_ros.frame_io.read_image`), copy them into a
+  pooled output message (:class:`~mechdeconv_ros.image_msgs.OutputImagePool`) and publish
+  that: the conversion and the message fill, without the remap;
+* ``remap``: the same with ``Rectifier.correct`` (Case 2 model of the frame's size, built at
+  the first frame) instead of the copy;
+* ``info``: and publish ``camera_info`` (the model's prebuilt message, restamped);
+* ``info_rect``: and ``camera_info_rect``.
+
+What remains between the last rung and ``correct_node`` is the node itself: the live model's
+reference read, counters, diagnostics timer, parameter callbacks, matched-event waitables and
+the rebuild and summary threads. With ``MECHDECONV_STAGE_TIMES`` set the relay times its
+stages as correct_node does (:mod:`mechdeconv_ros.stage_clock`).
+
 Run::
 
-    python -m benchmarks.passthrough_node [--executor single|multi] [--ros-args ...]
+    python -m benchmarks.passthrough_node [--executor single|multi] [--upto RUNG]
+        [--ros-args ...]
 
-``--executor multi`` uses a two-thread MultiThreadedExecutor as correct_node does (default:
-single, the cheapest relay). SIGINT stops it with exit code 0.
+``--executor multi`` uses a two-thread MultiThreadedExecutor (default: single, the cheapest
+relay, as correct_node). SIGINT stops it with exit code 0.
 """
 
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 import sys
+from typing import Any
 
-from mechdeconv_ros.frame_io import sensor_qos
+from mechdeconv_ros.diagnostics import FrameStats
+from mechdeconv_ros.frame_io import read_image, sensor_qos
+from mechdeconv_ros.image_msgs import camera_infos_from_model, OutputImagePool
+from mechdeconv_ros.stage_clock import stage_clock_from_env
+import numpy as np
 import rclpy
 from rclpy.executors import (
     ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor)
 from rclpy.node import Node
-from sensor_msgs.msg import Image
+from sensor_msgs.msg import CameraInfo, Image
+
+#: The rungs of ``--upto``, each adding one stage to the one before.
+RUNGS = ('relay', 'copy', 'remap', 'info', 'info_rect')
+CASE2_YAML = Path(__file__).resolve().parents[1] / 'config' / 'case2.yaml'
 
 
 class PassthroughNode(Node):
-    """Republish ``image_raw`` on ``image_rect`` unchanged."""
+    """Republish ``image_raw`` on ``image_rect``, doing correct_node's work up to a rung."""
 
-    def __init__(self) -> None:
-        """Create the publisher and the subscription."""
+    def __init__(self, upto: str = 'relay') -> None:
+        """
+        Create the publishers and the subscription.
+
+        :param upto: one of :data:`RUNGS`.
+        """
         super().__init__('passthrough_node')
         self.frames = 0
+        self._rung = RUNGS.index(upto)
+        self._stage_clock = stage_clock_from_env()
+        self._stats = FrameStats()
+        self._pool = OutputImagePool()
+        self._model: Any = None         # (size, Rectifier, (camera_info, camera_info_rect))
         self._pub = self.create_publisher(Image, 'image_rect', sensor_qos())
+        self._pub_info = self.create_publisher(CameraInfo, 'camera_info', sensor_qos())
+        self._pub_info_rect = self.create_publisher(CameraInfo, 'camera_info_rect',
+                                                    sensor_qos())
         self._sub = self.create_subscription(Image, 'image_raw', self._on_image, sensor_qos())
 
+    def _model_for(self, width: int, height: int) -> Any:
+        if self._model is None or self._model[0] != (width, height):
+            from mechdeconv_ros.model import build_model
+            from mechdeconv_ros.params import load_params_file
+            from mechdeconv_ros.remap import Rectifier
+            values = load_params_file(CASE2_YAML)
+            values.update({'sensor.width_px': 0, 'sensor.height_px': 0})
+            model = build_model(values, width, height)
+            self._model = ((width, height), Rectifier(model), camera_infos_from_model(model))
+        return self._model
+
     def _on_image(self, msg: Image) -> None:
-        self._pub.publish(msg)
+        clock = self._stage_clock
+        if clock is not None:
+            clock.start(msg.header.stamp)
         self.frames += 1
+        if self._rung == 0:
+            self._pub.publish(msg)
+            if clock is not None:
+                clock.mark('publish_image')
+                clock.end()
+            return
+        pixels, encoding = read_image(msg, self._stats)
+        if clock is not None:
+            clock.mark('read')
+        height, width = pixels.shape[:2]
+        _, rectifier, (info, info_rect) = self._model_for(width, height)
+        out = self._pool.get(width, height, encoding.name)
+        if clock is not None:
+            clock.mark('model')
+        if self._rung == 1:
+            np.copyto(out.pixels, pixels)
+        else:
+            rectifier.correct(pixels, out.pixels)
+        if clock is not None:
+            clock.mark('copy' if self._rung == 1 else 'remap')
+        out.msg.header = msg.header
+        self._pub.publish(out.msg)
+        if clock is not None:
+            clock.mark('publish_image')
+        if self._rung >= 3:
+            info.header = msg.header
+            self._pub_info.publish(info)
+            if clock is not None:
+                clock.mark('publish_info')
+        if self._rung >= 4:
+            info_rect.header = msg.header
+            self._pub_info_rect.publish(info_rect)
+            if clock is not None:
+                clock.mark('publish_info_rect')
+        if clock is not None:
+            clock.end()
+
+    def destroy_node(self) -> None:
+        """Write the stage times (when on), then destroy the node."""
+        if self._stage_clock is not None:
+            self._stage_clock.dump()
+        super().destroy_node()
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -51,13 +146,14 @@ def main(argv: list[str] | None = None) -> None:
     argv = list(sys.argv if argv is None else argv)
     parser = argparse.ArgumentParser(description='pass-through image relay')
     parser.add_argument('--executor', choices=('single', 'multi'), default='single')
+    parser.add_argument('--upto', choices=RUNGS, default='relay')
     args, ros_args = parser.parse_known_args(rclpy.utilities.remove_ros_args(argv)[1:])
     if ros_args:
         parser.error(f'unknown arguments {ros_args}')
     rclpy.init(args=argv)
     node = None
     try:
-        node = PassthroughNode()
+        node = PassthroughNode(args.upto)
         executor = (MultiThreadedExecutor(num_threads=2) if args.executor == 'multi'
                     else SingleThreadedExecutor())
         executor.add_node(node)

@@ -18,8 +18,10 @@ that turns such a document into text or pictures lives here, so the tables of ``
 * :mod:`benchmarks.node_latency`: :func:`node_tables`, :func:`node_plot`;
 * :mod:`benchmarks.soak`: :func:`soak_report`, :func:`soak_plot`.
 
-The benchmark modules are imported inside the functions that need their constants (they
-import this module at their top).
+This module never imports a benchmark module (they import it): what a table or figure needs
+beyond the measurements (a target, a rate, a label) travels in the results document, and the
+two helpers the benchmarks and the tables share, :func:`best_variant` and :func:`find_run`,
+live here.
 """
 
 from __future__ import annotations
@@ -168,6 +170,22 @@ def fmt_pct(value: float | None) -> str:
 def verdict(met: bool | None) -> str:
     """Return ``met`` or ``missed`` for a target."""
     return 'met' if met else 'missed'
+
+
+def best_variant(variants: Mapping[str, Mapping[str, Any]], kind: str, stat: str,
+                 threads: int | None = None) -> tuple[str, float]:
+    """Return the name and ``stat`` of the fastest variant of a kind (and thread count)."""
+    best = ('', math.inf)
+    for name, v in variants.items():
+        if v['kind'] == kind and (threads is None or v['threads'] == threads):
+            if v[stat] < best[1]:
+                best = (name, v[stat])
+    return best
+
+
+def find_run(runs: Sequence[Mapping[str, Any]], **match: Any) -> Mapping[str, Any] | None:
+    """Return the first run whose fields equal ``match`` (None when there is none)."""
+    return next((r for r in runs if all(r.get(k) == v for k, v in match.items())), None)
 
 
 def markdown_table(header: Sequence[str], rows: Iterable[Sequence[Any]]) -> list[str]:
@@ -356,7 +374,6 @@ def accuracy_tables(doc: Mapping[str, Any]) -> list[str]:
 
 def speed_plots(doc: Mapping[str, Any], out_dir: Path) -> dict[str, str]:
     """Write the per-frame figure (rgb8 and mono8) and the rebuild figure."""
-    from benchmarks import speed
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
@@ -370,14 +387,15 @@ def speed_plots(doc: Mapping[str, Any], out_dir: Path) -> dict[str, str]:
               ('opencv', 'best OpenCV remap', 'tab:green'),
               ('lensfunpy', 'lensfunpy map + remap', 'tab:purple'),
               ('image_geometry', 'image_geometry way (maps + cubic per call)', 'tab:red'))
-    for ax, encoding in zip(axes, speed.ENCODINGS):
+    encodings = list(dict.fromkeys(v['encoding'] for v in doc['per_frame'].values()))
+    for ax, encoding in zip(axes, encodings):
         entries = [(k, v) for k, v in doc['per_frame'].items() if v['encoding'] == encoding]
         labels = [v['size'] for _, v in entries]
         x = np.arange(len(entries))
         width = 0.16
         for i, (kind, label, color) in enumerate(series):
-            mins = [speed.best_variant(v['variants'], kind, 'min_ms')[1] for _, v in entries]
-            meds = [speed.best_variant(v['variants'], kind, 'median_ms')[1] for _, v in entries]
+            mins = [best_variant(v['variants'], kind, 'min_ms')[1] for _, v in entries]
+            meds = [best_variant(v['variants'], kind, 'median_ms')[1] for _, v in entries]
             if not all(math.isfinite(m) for m in mins):
                 continue
             pos = x + (i - 2) * width
@@ -408,9 +426,10 @@ def speed_plots(doc: Mapping[str, Any], out_dir: Path) -> dict[str, str]:
               for s in sizes]
         if any(math.isfinite(y) for y in ys):
             ax.loglog(pixels, ys, style, color=color, label=label)
-    if '1920x1080' in doc['rebuild']:
-        ax.plot([1920 * 1080 / 1e6], [speed.REBUILD_TARGET_MS], 'r*', ms=12,
-                label=f'target at 1080p: {speed.REBUILD_TARGET_MS:g} ms')
+    target = doc['rebuild'].get('1920x1080', {}).get('target_ms')
+    if target:
+        ax.plot([1920 * 1080 / 1e6], [target], 'r*', ms=12,
+                label=f'target at 1080p: {target:g} ms')
     ax.xaxis.set_minor_locator(matplotlib.ticker.NullLocator())
     ax.set_xticks(pixels, sizes)
     ax.set_xlabel('frame')
@@ -430,7 +449,6 @@ def _min_median(v: Mapping[str, Any] | None) -> str:
 
 def speed_tables(doc: Mapping[str, Any]) -> list[str]:
     """Return the markdown lines of the speed section."""
-    from benchmarks import speed
     lines = ['### Per-frame correction (ms, min / median; ratios min / median)', '',
              'Same frames, same run, interleaved rounds; bilinear unless noted; output into a '
              'preallocated array. Best OpenCV = fastest of cv2.remap with 2 x CV_32FC1, '
@@ -444,8 +462,8 @@ def speed_tables(doc: Mapping[str, Any]) -> list[str]:
         v = f['variants']
         ours_name = r_min['ours_best']
         cv_name = r_min['opencv_best']
-        lf = speed.best_variant(v, 'lensfunpy', 'min_ms')[0]
-        ig = speed.best_variant(v, 'image_geometry', 'min_ms')[0]
+        lf = best_variant(v, 'lensfunpy', 'min_ms')[0]
+        ig = best_variant(v, 'image_geometry', 'min_ms')[0]
         rows.append([
             key, _min_median(v['copy']), f'{_min_median(v[ours_name])} ({ours_name.split()[-1]})',
             f'{_min_median(v[cv_name])} ({cv_name[3:]})',
@@ -483,7 +501,7 @@ def speed_tables(doc: Mapping[str, Any]) -> list[str]:
          'lensfunpy map build', 'ours / OpenCV (1 thread, median)'], rows)
     hd = doc['rebuild'].get('1920x1080')
     if hd:
-        lines += ['', f'Target rebuild <= {speed.REBUILD_TARGET_MS:g} ms at 1920x1080: '
+        lines += ['', f"Target rebuild <= {hd['target_ms']:g} ms at 1920x1080: "
                   f"{verdict(hd['target_met_1t'])} at 1 thread (median "
                   f"{fmt_ms(hd['ours_ms_median_1t'])} ms), "
                   f"{verdict(hd['target_met_2t'])} at 2 threads "
@@ -507,9 +525,20 @@ def speed_tables(doc: Mapping[str, Any]) -> list[str]:
 # The node end to end
 # ---------------------------------------------------------------------------------------------
 
+class _NodeConstants:
+    """The node benchmark's settings, as its results document states them."""
+
+    def __init__(self, doc: Mapping[str, Any]) -> None:
+        constants = doc.get('constants', {})
+        self.rate_hz = float(doc.get('rate_hz', 30.0))
+        self.target_rate = str(constants.get('target_rate_label', 'target rate'))
+        self.set_target_periods = float(constants.get('set_target_periods', 2))
+        self.busy_others_cores = float(constants.get('busy_others_cores', 0.3))
+
+
 def node_plot(doc: Mapping[str, Any], out_dir: Path) -> str:
     """Write throughput, latency, what the shm profile buys, and parameter-set reaction."""
-    from benchmarks import node_latency as nl
+    nl = _NodeConstants(doc)
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
@@ -525,7 +554,7 @@ def node_plot(doc: Mapping[str, Any], out_dir: Path) -> str:
         for i, (kind, transport, rate, label, color) in enumerate(series):
             vals, p99 = [], []
             for size in sizes:
-                run = nl.find_run(runs, kind=kind, size=size, rate=rate, transport=transport)
+                run = find_run(runs, kind=kind, size=size, rate=rate, transport=transport)
                 vals.append(run.get(metric, math.nan) if run else math.nan)
                 p99.append(run.get('p99_ms', math.nan) if run else math.nan)
             if all(not math.isfinite(v) for v in vals):
@@ -548,26 +577,26 @@ def node_plot(doc: Mapping[str, Any], out_dir: Path) -> str:
     bars(ax, (('passthrough', 'shm', 'flat out', 'pass-through, publisher flat out',
                'tab:gray'),
               ('node', 'shm', 'flat out', 'correct_node, publisher flat out', 'lightsteelblue'),
-              ('node', 'shm', nl.TARGET_RATE, 'correct_node, camera paced at the bound',
+              ('node', 'shm', nl.target_rate, 'correct_node, camera paced at the bound',
                'tab:blue')), 'fps')
     targets(ax, 'serial_bound_fps', 'r--', 'target: serial bound 1/(1/pass-through + remap)')
     ax.set_title('throughput, shm profile [fps delivered]', fontsize=10)
     ax = axes[0, 1]
-    bars(ax, (('passthrough', 'shm', f'{nl.RATE_HZ:g} Hz', 'pass-through', 'tab:gray'),
-              ('node', 'shm', f'{nl.RATE_HZ:g} Hz', 'correct_node', 'tab:blue')), 'p50_ms')
+    bars(ax, (('passthrough', 'shm', f'{nl.rate_hz:g} Hz', 'pass-through', 'tab:gray'),
+              ('node', 'shm', f'{nl.rate_hz:g} Hz', 'correct_node', 'tab:blue')), 'p50_ms')
     targets(ax, 'latency_target_ms', 'r--', 'target: pass-through p50 + 1.5 x remap')
-    ax.set_title(f'latency at {nl.RATE_HZ:g} Hz, shm profile: p50 (bar), p99 (tick) [ms]',
+    ax.set_title(f'latency at {nl.rate_hz:g} Hz, shm profile: p50 (bar), p99 (tick) [ms]',
                  fontsize=10)
     ax = axes[1, 0]
-    bars(ax, (('passthrough', 'shm', f'{nl.RATE_HZ:g} Hz', 'pass-through, shm profile',
+    bars(ax, (('passthrough', 'shm', f'{nl.rate_hz:g} Hz', 'pass-through, shm profile',
                'tab:gray'),
-              ('node', 'shm', f'{nl.RATE_HZ:g} Hz', 'correct_node, shm profile', 'tab:blue'),
-              ('passthrough', 'default', f'{nl.RATE_HZ:g} Hz', 'pass-through, default transports',
+              ('node', 'shm', f'{nl.rate_hz:g} Hz', 'correct_node, shm profile', 'tab:blue'),
+              ('passthrough', 'default', f'{nl.rate_hz:g} Hz', 'pass-through, default transports',
                'silver'),
-              ('node', 'default', f'{nl.RATE_HZ:g} Hz', 'correct_node, default transports',
+              ('node', 'default', f'{nl.rate_hz:g} Hz', 'correct_node, default transports',
                'lightsteelblue')), 'fps')
-    ax.axhline(nl.RATE_HZ, color='k', lw=0.8, ls=':', label=f'published: {nl.RATE_HZ:g} fps')
-    ax.set_title(f'frames delivered of a {nl.RATE_HZ:g} Hz best-effort stream [fps]', fontsize=10)
+    ax.axhline(nl.rate_hz, color='k', lw=0.8, ls=':', label=f'published: {nl.rate_hz:g} fps')
+    ax.set_title(f'frames delivered of a {nl.rate_hz:g} Hz best-effort stream [fps]', fontsize=10)
     ax = axes[1, 1]
     sets = [r for r in doc['children'].get('shm', {}).get('set_parameters', [])
             if 'reply_to_first_new_frame_ms' in r]
@@ -578,7 +607,7 @@ def node_plot(doc: Mapping[str, Any], out_dir: Path) -> str:
         vals = [r['send_to_first_new_frame_ms'] for r in sets if r['size'] == size]
         ax.plot([j + 0.08] * len(vals), vals, 'o', mfc='none', color='tab:purple', alpha=0.7,
                 label='from the request' if j == 0 else None)
-    ax.axhline(nl.SET_TARGET_PERIODS * 1000.0 / nl.RATE_HZ, color='r', ls='--', lw=1,
+    ax.axhline(nl.set_target_periods * 1000.0 / nl.rate_hz, color='r', ls='--', lw=1,
                label='target: 2 frame periods at 30 fps')
     ax.set_xticks(range(len(sizes)), sizes)
     ax.set_xlim(-0.5, len(sizes) - 0.5)
@@ -604,19 +633,31 @@ def _set_cell(t: Mapping[str, Any]) -> str:
     return cell
 
 
+def _flat_out_cell(t: Mapping[str, Any], doc: Mapping[str, Any]) -> str:
+    if 'node_flat_out_fps' not in t:
+        return '-'
+    constants = doc.get('constants', {})
+    share = float(constants.get('flat_out_share', 0.9))
+    cell = (f"{fmt_num(t['node_flat_out_fps'])} of {fmt_num(share * t['serial_bound_fps'])} "
+            f"({fmt_num(t['node_flat_out_over_serial_bound'], 2)} x)")
+    if t.get('flat_out_met') is None:
+        return f"{cell}: not measurable here, {t.get('cores', '?')} cores"
+    return f"{cell}: {verdict(t['flat_out_met'])}"
+
+
 def node_tables(doc: Mapping[str, Any]) -> list[str]:
     """Return the markdown lines of the node section."""
-    from benchmarks import node_latency as nl
+    nl = _NodeConstants(doc)
     lines = ['### The node end to end (publisher -> node -> subscriber, rgb8, best effort)', '',
              'Three processes on the 2 vCPUs; latency = subscriber receive time - stamp set '
-             f'by the publisher (two hops), at {nl.RATE_HZ:g} Hz; throughput with the publisher '
+             f'by the publisher (two hops), at {nl.rate_hz:g} Hz; throughput with the publisher '
              'flat out. Pass-through = subscribe + republish (same QoS, same transport). '
              'shm = config/fastdds_shm.xml in every process; default = Fast DDS builtin '
              'transports. All with the Makefile MALLOC_* settings. Relay CPU ms/frame = the '
              "relay process's CPU time per delivered frame; node callback = correct_node's "
              'own per-frame time from its /diagnostics; others cores = CPU used by processes '
              'outside the measurement (a window with more than '
-             f'{nl.BUSY_OTHERS_CORES:g} was measured once more and the less disturbed one kept).',
+             f'{nl.busy_others_cores:g} was measured once more and the less disturbed one kept).',
              '']
     rows = []
     for transport, child in doc['children'].items():
@@ -648,10 +689,11 @@ def node_tables(doc: Mapping[str, Any]) -> list[str]:
             f"{fmt_num(t.get('node_p50_ms'))} vs <= {fmt_num(t.get('latency_target_ms'))}: "
             f"{verdict(t.get('latency_met'))}"
             if 'node_p50_ms' in t else '-',
-            _set_cell(t), fmt_num(t.get('node_rebuild_ms_median'))])
+            _flat_out_cell(t, doc), _set_cell(t), fmt_num(t.get('node_rebuild_ms_median'))])
     lines += markdown_table(['frame', 'bare remap ms (median; node default threads)',
                              'node fps delivered of a camera at the serial bound',
                              'node p50 ms vs pass-through p50 + 1.5 x remap',
+                             'flat out vs 0.9 x serial bound (>= 4 cores)',
                              'param set reply -> first new frame ms (median / max)',
                              'node rebuild ms (its diagnostics)'], rows)
     if doc['errors']:

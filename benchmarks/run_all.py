@@ -10,7 +10,8 @@ Run every benchmark (``make bench``) and write the full measured tables.
 
 Waits (up to ``--wait-load`` seconds, default 600) for the 1-minute load average to drop
 below 0.5, so the timings are taken on a quiet machine; then runs :mod:`benchmarks.accuracy`,
-:mod:`benchmarks.speed`, :mod:`benchmarks.node_latency`, :mod:`benchmarks.wide`,
+:mod:`benchmarks.speed`, :mod:`benchmarks.node_latency`, :mod:`benchmarks.stages`,
+:mod:`benchmarks.wide`,
 :mod:`benchmarks.vignetting` and :mod:`benchmarks.compressed_input`, each writing its
 ``results/<name>.json`` and figures, and finally prints the markdown tables (made by
 :mod:`benchmarks.report`) and writes them to ``results/README_tables.md`` and to
@@ -31,7 +32,7 @@ import time
 from typing import Any, Callable
 
 from benchmarks import (
-    accuracy, compressed_input, node_latency, report, speed, vignetting, wide)
+    accuracy, compressed_input, node_latency, report, speed, stages, vignetting, wide)
 from benchmarks.common import log, RESULTS, wait_for_low_load
 from benchmarks.report import machine_info, machine_line, write_json
 
@@ -39,6 +40,7 @@ BENCHMARKS: dict[str, tuple[Callable[..., Any], Callable[[Any], list[str]]]] = {
     'accuracy': (accuracy.run, report.accuracy_tables),
     'speed': (speed.run, report.speed_tables),
     'node': (node_latency.run, report.node_tables),
+    'stages': (stages.run, stages.tables),
     'wide': (wide.run, wide.tables),
     'vignetting': (vignetting.run, vignetting.tables),
     'compressed': (compressed_input.run,

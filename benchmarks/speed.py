@@ -10,7 +10,7 @@ at 640x480, 1280x720, 1920x1080 and 3840x2160, rgb8 and mono8, with the Case 2 l
 
 Per frame (the output written into a preallocated array):
 
-* **ours**: ``Rectifier.correct(src, dst)`` (fixed-point CV_16SC2 + CV_16UC1 maps, bilinear);
+* **ours**: ``Rectifier.correct(src, dst)`` (2 x CV_32FC1 maps, bilinear);
 * **OpenCV**: ``cv2.remap`` bilinear with the maps of ``cv2.initUndistortRectifyMap`` built from
   our equivalent K, D and K_new, as 2 x CV_32FC1, CV_32FC2 and CV_16SC2 + CV_16UC1, each with
   1 and 2 threads (``cv2.setNumThreads``); the best of these six is the reference;
@@ -38,7 +38,7 @@ import time
 from typing import Any, Mapping
 
 from benchmarks.common import bench_main, interleave, log, RESULTS, Variant
-from benchmarks.report import machine_info, speed_plots, speed_tables, write_json
+from benchmarks.report import best_variant, machine_info, speed_plots, speed_tables, write_json
 import cv2
 from mechdeconv_ros.model import build_model, LensModel
 from mechdeconv_ros.params import load_params_file
@@ -207,17 +207,6 @@ def per_frame(model: LensModel, rectifier: Rectifier, maps: Mapping[str, Any],
     raw = {name: t.samples for name, t in timings.items()}
     return {'variants': out, 'samples_ms': raw,
             'ours_vs_opencv_output_mean_abs_diff': float(diff.mean())}, others
-
-
-def best_variant(variants: Mapping[str, Mapping[str, Any]], kind: str, stat: str,
-                 threads: int | None = None) -> tuple[str, float]:
-    """Return the name and ``stat`` of the fastest variant of a kind (and thread count)."""
-    best = ('', math.inf)
-    for name, v in variants.items():
-        if v['kind'] == kind and (threads is None or v['threads'] == threads):
-            if v[stat] < best[1]:
-                best = (name, v[stat])
-    return best
 
 
 def frame_ratios(variants: Mapping[str, Mapping[str, Any]]) -> dict[str, Any]:

@@ -22,6 +22,30 @@ SingleThreadedExecutor (on 2 vCPUs the MultiThreadedExecutor's wait loop cost 64
 follows the outputs' publisher matched events (with the shipped Fast DDS profile within 1 ms
 of a remote subscription's creation or removal); an rmw without them is polled every
 :data:`LAZY_POLL_S`.
+
+Frame path (``_on_image`` / ``_on_compressed`` -> ``_on_frame`` -> ``_correct``; executor
+thread only, one frame at a time), in order, with the stage names of the stage clock
+(:mod:`~mechdeconv_ros.stage_clock`, ``MECHDECONV_STAGE_TIMES``; ``make bench`` times each):
+
+1. ``read``: the message's pixels as a numpy view (:mod:`~mechdeconv_ros.frame_io`; a
+   compressed frame is decoded here). New input kinds (e.g. Bayer) add their conversion here.
+2. ``model``: ONE read of the active model (``LiveModel.model_for_frame``: the reference, or
+   a synchronous build for a new frame size) and the output message from the pool. Everything
+   after this uses that record only, so a frame never mixes two models; per-frame state that
+   depends on the model (zoom, colour planes) belongs in the record, built by the rebuild
+   thread, not computed here.
+3. ``remap``: ``Rectifier.correct`` into the output message's buffer (and the vignetting gain).
+4. ``publish_image``: ``image_rect`` with the input's header; everything after it is off the
+   image's latency.
+5. ``publish_info`` / ``publish_info_rect``: the model's prebuilt CameraInfos, restamped.
+6. ``bookkeeping``: the channel hint for the rebuild thread, counters and frame time.
+7. ``compressed``: only while ``image_rect/compressed`` has a subscriber.
+
+State on the frame path and its owner: the counters (``_stats``), the output pool, the
+channel hint, the cached ``image_rect.compressed.*`` settings (refreshed by the post-set
+callback, same thread) and whether the compressed output has a subscriber (refreshed on the
+outputs' matched events, same thread) belong to the executor thread; the active model record
+and its CameraInfos are built by the rebuild thread and read here through one reference.
 """
 
 from __future__ import annotations
@@ -33,7 +57,8 @@ import cv2
 from diagnostic_msgs.msg import DiagnosticArray
 from mechdeconv_ros.diagnostics import diagnostics_message, FrameStats
 from mechdeconv_ros.frame_io import (
-    compressed_output, FrameRefused, read_compressed, read_image, sensor_qos)
+    compressed_output, COMPRESSED_PARAMS, compressed_settings, FrameRefused, read_compressed,
+    read_image, sensor_qos)
 from mechdeconv_ros.image_msgs import camera_infos_from_model, Encoding, OutputImagePool
 from mechdeconv_ros.live_model import (  # noqa: F401 - MAX_SURFACES: the node's limit
     changes_of, FrameDropped, LiveModel, MAX_SURFACES)
@@ -42,6 +67,7 @@ from mechdeconv_ros.param_services import guard_parameter_services
 from mechdeconv_ros.params import SCHEMA
 from mechdeconv_ros.remap import Rectifier
 from mechdeconv_ros.ros_params import declare_schema
+from mechdeconv_ros.stage_clock import stage_clock_from_env, StageClock
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.event_handler import PublisherEventCallbacks, UnsupportedEventTypeError
@@ -78,6 +104,8 @@ class CorrectNode(Node):
         self._channels = 1          # of the last frame: the rebuild prepares its gain map
         self._depth_gain_noted = False
         self._warned_model: Any = None
+        self._compressed_wanted = False     # image_rect/compressed has a subscriber
+        self._stage_clock = stage_clock_from_env()    # None unless MECHDECONV_STAGE_TIMES is set
         super().__init__('correct_node', **kwargs)
         self._live = LiveModel(
             declare_schema(self, SCHEMA), extras=camera_infos_from_model, log=log_function(self),
@@ -85,6 +113,7 @@ class CorrectNode(Node):
         guard_parameter_services(self, self._live.start_requested_rebuild,
                                  bool(kwargs.get('allow_undeclared_parameters', False)))
         self._apply_threads()
+        self._compressed_settings = compressed_settings(self._live.value)
         self._stats.image_transport = str(self._live.value('image_transport'))
         self._stats.input_topic = self.resolve_topic_name('image_raw') + (
             '/compressed' if self._stats.image_transport == 'compressed' else '')
@@ -143,6 +172,8 @@ class CorrectNode(Node):
             self._apply_threads()
         if 'lazy_subscription' in changed:
             self._update_subscription()
+        if changed & set(COMPRESSED_PARAMS):
+            self._compressed_settings = compressed_settings(self._live.value)
 
     def _build_maps(self, model: Any) -> Rectifier:
         """
@@ -177,19 +208,33 @@ class CorrectNode(Node):
         self._on_frame(msg, read_compressed)
 
     def _on_frame(self, msg: Any, read: Callable[[Any, FrameStats], Any]) -> None:
+        """
+        Run the frame path (executor thread only; see the module docstring, "Frame path").
+
+        Each ``clock`` test is one ``is None`` when the stage clock is off (the default).
+        """
         start = time.perf_counter()
+        clock = self._stage_clock
+        if clock is not None:
+            clock.start(msg.header.stamp)
         self._stats.frames_in += 1
         try:
             pixels, encoding = read(msg, self._stats)
         except FrameRefused as refused:
             return self._frame_error(refused.kind, refused.error, refused.line)
-        self._correct(msg.header, pixels, encoding, start)
+        if clock is not None:
+            clock.mark('read')
+        self._correct(msg.header, pixels, encoding, start, clock)
+        if clock is not None:
+            clock.end()
 
-    def _correct(self, header: Any, pixels: Any, encoding: Encoding, start: float) -> None:
+    def _correct(self, header: Any, pixels: Any, encoding: Encoding, start: float,
+                 clock: StageClock | None) -> None:
         """Correct one frame's pixels and publish them with both CameraInfos; never raises."""
         stats = self._stats
         height, width = pixels.shape[:2]
         try:
+            # ONE read of the active model: everything below uses this record only.
             active = self._live.model_for_frame(int(width), int(height))
         except FrameDropped as drop:
             stats.frames_dropped += 1
@@ -199,9 +244,27 @@ class CorrectNode(Node):
         try:
             model = active.model
             out = self._pool.get(model.out_width, model.out_height, encoding.name)
+            if clock is not None:
+                clock.mark('model')
             # Depth is never gain-corrected (a distance divided by RI means nothing).
             active.rectifier.correct(pixels, out.pixels, nearest=encoding.depth,
                                      gain=not encoding.depth)
+            if clock is not None:
+                clock.mark('remap')
+            # The image first: what comes after it is off the image's latency.
+            out.msg.header = header
+            self._pub_image.publish(out.msg)
+            if clock is not None:
+                clock.mark('publish_image')
+            info_raw, info_rect = active.extras
+            info_raw.header = header
+            self._pub_info.publish(info_raw)
+            if clock is not None:
+                clock.mark('publish_info')
+            info_rect.header = header
+            self._pub_info_rect.publish(info_rect)
+            if clock is not None:
+                clock.mark('publish_info_rect')
             self._channels = 1 if pixels.ndim == 2 else int(pixels.shape[2])
             if encoding.depth and active.rectifier.gain is not None and \
                     not self._depth_gain_noted:
@@ -209,15 +272,14 @@ class CorrectNode(Node):
                 self.get_logger().info(
                     f'output.vignetting_correction: {encoding.name} is a depth encoding; '
                     'depth images are remapped but never gain-corrected')
-            info_raw, info_rect = active.extras
-            out.msg.header = info_raw.header = info_rect.header = header
-            self._pub_image.publish(out.msg)
-            self._pub_info.publish(info_raw)
-            self._pub_info_rect.publish(info_rect)
-            if self._pub_compressed.get_subscription_count() > 0:
+            if clock is not None:
+                clock.mark('bookkeeping')
+            if self._compressed_wanted:
                 self._pub_compressed.publish(compressed_output(
-                    out.pixels, encoding, header, self._live.value))
+                    out.pixels, encoding, header, self._compressed_settings))
                 stats.frames_out_compressed += 1
+                if clock is not None:
+                    clock.mark('compressed')
         except FrameRefused as refused:     # the compressed output only: image_rect is out
             self._frame_error(refused.kind, refused.error)
         except Exception as err:        # noqa: B902 - one bad frame must not stop the stream
@@ -225,6 +287,8 @@ class CorrectNode(Node):
             return self._frame_error('correction', f'correction failed: {err}')
         stats.frames_out += 1
         stats.add_time((time.perf_counter() - start) * 1e3)
+        if clock is not None:
+            clock.mark('bookkeeping')
 
     def _frame_error(self, kind: str, error: str, line: str = '') -> None:
         """Record a problem for diagnostics; log it at most every LOG_THROTTLE_S per kind."""
@@ -237,6 +301,7 @@ class CorrectNode(Node):
 
     def _update_subscription(self) -> None:
         """Subscribe to image_raw while it is needed (lazy), unsubscribe when it is not."""
+        self._compressed_wanted = self._pub_compressed.get_subscription_count() > 0
         lazy = bool(self._live.value('lazy_subscription'))
         wanted = not lazy or any(pub.get_subscription_count() > 0 for pub in self._outputs)
         if wanted and self._subscription is None:
@@ -268,6 +333,8 @@ class CorrectNode(Node):
         """Stop the rebuild thread, then destroy the node."""
         if self._live is not None:
             self._live.stop()
+        if self._stage_clock is not None:
+            self._stage_clock.dump()
         super().destroy_node()
 
 

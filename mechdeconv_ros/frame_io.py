@@ -110,22 +110,40 @@ def read_compressed(msg: CompressedImage, stats: FrameStats) -> tuple[Any, Encod
     return decoded.pixels, decoded.encoding
 
 
+#: The parameters of ``image_rect/compressed``, in the order :func:`compressed_settings` gives.
+COMPRESSED_PARAMS = ('image_rect.compressed.format', 'image_rect.compressed.jpeg_quality',
+                     'image_rect.compressed.png_level')
+
+
+def compressed_settings(value: Callable[[str], Any]) -> tuple[str, int, int]:
+    """
+    Return ``(format, jpeg_quality, png_level)`` of ``image_rect/compressed``.
+
+    The node reads them once at start-up and again after a set that names one of
+    :data:`COMPRESSED_PARAMS`, not per frame (each read takes the live model's lock).
+
+    :param value: the node's parameter values by name.
+    :return: the three settings, coerced.
+    """
+    fmt, quality, level = (value(name) for name in COMPRESSED_PARAMS)
+    return str(fmt), int(quality), int(level)
+
+
 def compressed_output(pixels: Any, encoding: Encoding, header: Any,
-                      value: Callable[[str], Any]) -> CompressedImage:
+                      settings: tuple[str, int, int]) -> CompressedImage:
     """
     Encode a corrected image for ``image_rect/compressed``.
 
     :param pixels: the corrected pixels.
     :param encoding: their encoding.
     :param header: the input frame's header.
-    :param value: the node's parameter values by name (``image_rect.compressed.*``).
+    :param settings: :func:`compressed_settings` of the node.
     :return: the message.
     :raises FrameRefused: when the encoding cannot be compressed (e.g. 32FC1).
     """
     try:
-        fmt, data = encode(pixels, encoding.name, str(value('image_rect.compressed.format')),
-                           jpeg_quality=int(value('image_rect.compressed.jpeg_quality')),
-                           png_level=int(value('image_rect.compressed.png_level')))
+        fmt, data = encode(pixels, encoding.name, settings[0], jpeg_quality=settings[1],
+                           png_level=settings[2])
     except Exception as err:        # noqa: B902 - image_rect is out already
         raise FrameRefused('compressed output',
                            f'image_rect/compressed not published: {err}') from None

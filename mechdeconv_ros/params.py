@@ -119,8 +119,8 @@ def _moving_specs(mechanism: str) -> tuple[ParamSpec, ...]:
 
 
 #: Largest output (and input) frame the node accepts, in pixels: 8192 x 8192. The maps cost
-#: 6 bytes per output pixel (CV_16SC2 + CV_16UC1) plus 8 bytes of float maps while they are
-#: built, so this bounds a model at about 1 GiB transiently and 400 MiB held.
+#: 8 bytes per output pixel (two CV_32FC1) plus about 12 bytes of intermediates while they
+#: are built, so this bounds a model at about 1.3 GiB transiently and 540 MiB held.
 MAX_FRAME_PIXELS = 8192 * 8192
 #: Largest width or height, in pixels, of an output or input frame.
 MAX_SIDE_PX = 16384

@@ -132,3 +132,38 @@ def test_vignetting_benchmark_quick(tmp_path):
     assert all(r['gain']['median_ms'] > 0 for r in doc['per_frame'].values())
     assert doc['agreement']['case2']['corner_ri'] == pytest.approx(0.837, abs=0.002)
     assert any('| lens |' in line for line in vignetting.tables(doc))
+
+
+@pytest.mark.ros
+def test_stages_quick(tmp_path):
+    """Every rung runs, exits 0 and times its stages; the tables name the node's stages."""
+    from benchmarks import stages
+    doc = stages.run(tmp_path, quick=True)
+    assert doc['errors'] == []
+    assert {r['rung'] for r in doc['runs']} == set(stages.RUNGS)
+    by_rung = {r['rung']: r for r in doc['runs']}
+    assert all(r['fps'] > 5.0 and r['stage_frames'] > 0 for r in doc['runs']), doc['runs']
+    assert 'remap' not in by_rung['relay']['stages']
+    node = by_rung['node']['stages']
+    for stage in ('receive', 'read', 'model', 'remap', 'publish_image', 'out_hop',
+                  'publish_info', 'publish_info_rect', 'bookkeeping'):
+        assert node[stage] >= 0.0, stage
+    assert by_rung['node']['cpu_ms_per_frame']['main'] >= 0.0
+    assert (tmp_path / 'stages.json').exists()
+    text = '\n'.join(stages.tables(doc))
+    assert 'publish camera_info_rect' in text and 'node p50' in text
+
+
+def test_report_imports_no_benchmark():
+    """The module that writes the reports never calls back into the benchmarks it reports."""
+    import ast
+    tree = ast.parse(open(report.__file__, encoding='utf-8').read())
+    imported = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            imported |= {alias.name for alias in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            imported.add(node.module or '')
+            if node.module == 'benchmarks':
+                imported |= {f'benchmarks.{alias.name}' for alias in node.names}
+    assert not {name for name in imported if name.startswith('benchmarks')}, imported
