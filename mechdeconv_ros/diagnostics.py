@@ -53,6 +53,8 @@ class FrameStats:
         self.decode_ms_max = 0.0        # since the last diagnostics message
         self.decode_ms_sum = 0.0        # since the last diagnostics message
         self.decode_count = 0           # since the last diagnostics message
+        #: More entries for /diagnostics (the lens_state input's, lens_follower.py).
+        self.extra: dict[str, Any] = {}
 
     def add_decode_time(self, ms: float) -> None:
         """Record the decoding time of one compressed frame."""
@@ -132,6 +134,7 @@ def diagnostics_message(node: Node, live: LiveStatus, stats: FrameStats,
                         'decode_time_ms_mean': decode_mean,
                         'decode_time_ms_max': decode_max,
                         'decode_time_ms_last': stats.decode_ms_last})
+    entries.update(stats.extra)
     status = DiagnosticStatus(name=status_name(node), hardware_id='')
     warnings: list[str] = []
     summary_pending = live.active is not None and live.report is None

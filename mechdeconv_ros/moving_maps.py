@@ -313,3 +313,99 @@ def build_moving_maps(values: Mapping[str, Any], mechanisms: Sequence[Mechanism]
             progress(done, total)
     return MovingMaps(mechanisms, axes, cameras, model.width, model.height, model.out_width,
                       model.out_height, step, refine)
+
+
+class MovingRectifier:
+    """
+    The per-frame correction of a moving lens: the grid, and the map of the frame's state.
+
+    Stands where :class:`~mechdeconv_ros.remap.Rectifier` stands in the active model record
+    (``model``, ``correct``, ``gain``, ``gain_for``, ``out_shape``, ``vignetting_warning``);
+    the frame path calls :meth:`prepare` with the frame's lens state first. ``prepare`` and
+    ``correct`` run in the executor thread only (the map they share is theirs).
+    """
+
+    def __init__(self, model: Any, grid: MovingMaps) -> None:
+        """
+        Keep a model (its sizes and interpolation) and the grid of its lens.
+
+        :param model: the LensModel at the tables' first rows (the still model).
+        :param grid: :func:`build_moving_maps` of its values.
+        """
+        self.model = model
+        self.grid = grid
+        self.gain = None
+        self.vignetting_warning: str | None = None
+        if bool(model.values.get('output.vignetting_correction', False)):
+            self.vignetting_warning = (
+                'output.vignetting_correction: not applied while lens groups move '
+                '(lens.zoom.joint / lens.focus.joint set)')
+        self.camera, self._map = grid.at({})
+
+    def prepare(self, state: LensState) -> StateCamera:
+        """
+        Make the next :meth:`correct` use the map of a lens state.
+
+        :param state: mechanism -> joint position (clamped into the tables).
+        :return: the camera of that state (K, K_new, D for the CameraInfos).
+        """
+        self.camera, self._map = self.grid.at(state)
+        return self.camera
+
+    def gain_for(self, channels: int) -> None:
+        """Return None: no vignetting gain on a moving lens."""
+        return None
+
+    @property
+    def out_shape(self) -> tuple[int, int]:
+        """Return ``(out_height, out_width)``."""
+        return self.model.out_height, self.model.out_width
+
+    def correct(self, src: np.ndarray, dst: np.ndarray | None = None, *,
+                nearest: bool = False, gain: bool = True) -> np.ndarray:
+        """
+        Correct one frame with the prepared state's map.
+
+        :param src: the raw image (the model's size).
+        :param dst: optional preallocated output.
+        :param nearest: nearest-neighbour (depth images).
+        :param gain: ignored (no vignetting gain here).
+        :return: the corrected image.
+        :raises ValueError: when ``src`` does not have the model's size.
+        """
+        if src.shape[:2] != (self.model.height, self.model.width):
+            raise ValueError(f'frame is {src.shape[1]}x{src.shape[0]} px but the model is '
+                             f'{self.model.width}x{self.model.height} px')
+        flag = cv2.INTER_NEAREST if nearest else self.model.interpolation
+        return cv2.remap(src, self._map, None, flag, dst=dst, borderMode=cv2.BORDER_CONSTANT,
+                         borderValue=0)
+
+
+def is_moving(model: Any) -> bool:
+    """Return True when a model's lens has moving groups (its source has tables)."""
+    return bool(getattr(model.source, 'moving', ()))
+
+
+def moving_rectifier(model: Any, build: Callable[[Mapping[str, Any], int, int], Any],
+                     progress: Callable[[int, int], None] | None = None) -> MovingRectifier:
+    """
+    Build the grid of a moving lens's model and its rectifier (seconds: one model per state).
+
+    :param model: a LensModel whose source is a
+        :class:`~mechdeconv_ros.moving_source.MovingSource`.
+    :param build: ``build_model(values, width, height)``.
+    :param progress: called with ``(done, total)`` after each state.
+    :return: the rectifier.
+    """
+    source = model.source
+    first = dict(source.state)
+
+    def build_state(values: Mapping[str, Any]) -> Any:
+        thickness = values['lens.surfaces.thickness_mm']
+        if list(thickness) == list(model.values['lens.surfaces.thickness_mm']) and first:
+            return model        # the grid's first state is the model itself
+        return build(values, model.width, model.height)
+
+    grid = build_moving_maps(source.table_values, source.moving, build_state,
+                             progress=progress)
+    return MovingRectifier(model, grid)

@@ -108,9 +108,9 @@ def _moving_specs(mechanism: str) -> tuple[ParamSpec, ...]:
            "are tabled (at least 2, strictly increasing, the joint's unit); linear in between, "
            'clamped outside.', -1.0e9, 1.0e9),
         ParamSpec(f'{prefix}.surfaces', 'integer_array', [], '1',
-                  f'Gap indices the {mechanism} moves; 0-based indices into lens.surfaces.thickness_mm '
-                  'of air gaps (not a glass thickness, not the last entry, not a gap the other '
-                  'mechanism moves).', 0, 255),
+                  f'Gap indices the {mechanism} moves; 0-based indices into '
+                  'lens.surfaces.thickness_mm of air gaps (not a glass thickness, not the last '
+                  'entry, not a gap the other mechanism moves).', 0, 255),
         _a(f'{prefix}.thickness_mm', 'mm',
            f'Moving gaps of each {mechanism} row; the gaps at each position, row-major '
            '(len(positions) x len(surfaces)): row j holds them at positions[j].',
