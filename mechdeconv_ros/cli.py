@@ -307,7 +307,7 @@ def build_parser() -> argparse.ArgumentParser:
                          help='override one parameter, e.g. -p lens.stop_offset_mm=0.5')
         cmd.add_argument('--lens-state', metavar='zoom=X[,focus=Y]',
                          help='joint positions of a lens whose groups move (lens.zoom.joint, '
-                              'lens.focus.joint); default: the tables\' first rows')
+                              "lens.focus.joint); default: the tables' first rows")
         if sized:
             cmd.add_argument('--width', type=int, help='image width in px')
             cmd.add_argument('--height', type=int, help='image height in px')

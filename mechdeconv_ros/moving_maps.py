@@ -50,7 +50,9 @@ from mechdeconv_ros.lens_table import LensState, Mechanism, values_at
 import numpy as np
 import numpy.typing as npt
 
-#: Output pixels between two nodes of the coarse map (bilinear error ~ step^2: 0.005 px at 16).
+#: Output pixels between two nodes of the coarse map at 1920 px wide and up (bilinear error
+#: ~ step^2: 0.005 px at 16 px on config/zoom.yaml at 1920x1080); narrower images get nodes
+#: as many per image width (:func:`node_step`), at least every 2 px.
 NODE_STEP = 16
 #: Grid states per table interval (2: the rows and the mid-rows).
 REFINE = 2
@@ -73,6 +75,11 @@ class StateCamera:
     def P(self) -> FloatArray:  # noqa: N802 - the ROS CameraInfo field name
         """Return ``[K_new | 0]``."""
         return np.hstack([self.K_new, np.zeros((3, 1))])
+
+
+def node_step(out_width: int) -> int:
+    """Return the node spacing for an output width: 120 nodes across, 2 to 16 px apart."""
+    return int(min(NODE_STEP, max(2, out_width // 120)))
 
 
 def node_positions(size: int, step: int = NODE_STEP) -> tuple[FloatArray, int]:
@@ -287,7 +294,7 @@ class MovingMaps:
 
 def build_moving_maps(values: Mapping[str, Any], mechanisms: Sequence[Mechanism],
                       build: Callable[[Mapping[str, Any]], Any], *, refine: int = REFINE,
-                      step: int = NODE_STEP,
+                      step: int | None = None,
                       progress: Callable[[int, int], None] | None = None) -> MovingMaps:
     """
     Build the grid of a moving lens: a full model at every grid state.
@@ -296,7 +303,7 @@ def build_moving_maps(values: Mapping[str, Any], mechanisms: Sequence[Mechanism]
     :param mechanisms: the moving mechanisms (:func:`mechdeconv_ros.lens_table.mechanisms`).
     :param build: values of a still lens -> LensModel (its image size fixed by the caller).
     :param refine: grid states per table interval.
-    :param step: node spacing, output px.
+    :param step: node spacing, output px (None: :func:`node_step` of the output width).
     :param progress: called with ``(done, total)`` after each state.
     :return: the grid.
     :raises ValueError: when a state's model cannot be built (the model's reason).
@@ -308,6 +315,8 @@ def build_moving_maps(values: Mapping[str, Any], mechanisms: Sequence[Mechanism]
     for done, idx in enumerate(itertools.product(*(range(a.size) for a in axes)), 1):
         state = {m.name: float(a[i]) for m, a, i in zip(mechanisms, axes, idx)}
         model = build(values_at(values, state, tuple(mechanisms)))
+        if step is None:
+            step = node_step(model.out_width)
         cameras[idx] = _camera(model, state, step)
         if progress is not None:
             progress(done, total)
@@ -409,3 +418,57 @@ def moving_rectifier(model: Any, build: Callable[[Mapping[str, Any], int, int], 
     grid = build_moving_maps(source.table_values, source.moving, build_state,
                              progress=progress)
     return MovingRectifier(model, grid)
+
+
+def distortion_node_map(model: Any, ideal_K: FloatArray, step: int) -> npt.NDArray[np.float32]:
+    """
+    Return, at the nodes of a model's RAW image, the pixel of an ideal image it sees.
+
+    The inverse of :func:`node_map` (what :func:`mechdeconv_ros.remap.distortion_maps` gives
+    per pixel): raw node -> real radius -> ideal radius -> ``ideal_K`` pixel. For rendering
+    what a moving lens sees (the demo camera); outside the valid field the nodes point far
+    outside the ideal image.
+
+    :param model: a LensModel.
+    :param ideal_K: camera matrix of the ideal image.
+    :param step: pixels between nodes.
+    :return: ``(ny, nx, 2)`` float32.
+    """
+    xs, _ = node_positions(model.width, step)
+    ys, _ = node_positions(model.height, step)
+    u, v = np.meshgrid(xs, ys)
+    rect = model.rect_from_raw(np.stack([u, v], axis=-1))
+    xn = (rect[..., 0] - model.K_new[0, 2]) / model.K_new[0, 0]
+    yn = (rect[..., 1] - model.K_new[1, 2]) / model.K_new[1, 1]
+    out = np.empty(u.shape + (2,), np.float32)
+    out[..., 0] = ideal_K[0, 2] + ideal_K[0, 0] * xn
+    out[..., 1] = ideal_K[1, 2] + ideal_K[1, 1] * yn
+    out[~np.isfinite(out)] = -1000.0
+    return out
+
+
+def render_grid(model: Any, build: Callable[[Mapping[str, Any], int, int], Any],
+                ideal_K: FloatArray) -> MovingMaps:
+    """
+    Build the grid that renders what a moving lens sees of an ideal image, at any state.
+
+    Same states and interpolation as :func:`moving_rectifier`, the node maps inverted
+    (:func:`distortion_node_map`); ``at(state)[1]`` is the map over the raw image.
+
+    :param model: a LensModel of a moving lens (at its first rows).
+    :param build: ``build_model(values, width, height)``.
+    :param ideal_K: camera matrix of the ideal image (e.g. a chart's).
+    :return: the grid (its "output" is the raw image).
+    """
+    source = model.source
+    step = node_step(model.width)
+    axes = [grid_axis(m) for m in source.moving]
+    cameras: dict[tuple[int, ...], StateCamera] = {}
+    for idx in itertools.product(*(range(a.size) for a in axes)):
+        state = {m.name: float(a[i]) for m, a, i in zip(source.moving, axes, idx)}
+        at = build(values_at(source.table_values, state, source.moving), model.width,
+                   model.height)
+        cameras[idx] = StateCamera(state, at.K, at.K_new, tuple(at.D), at.distortion_model,
+                                   distortion_node_map(at, ideal_K, step))
+    return MovingMaps(source.moving, axes, cameras, model.width, model.height, model.width,
+                      model.height, step)
