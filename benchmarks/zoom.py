@@ -162,6 +162,7 @@ def strategy_and_accuracy(width: int, height: int, frames: int, reps: int) -> di
         'largest_state_steps': max(r['state_steps'] for r in rows),
         'accuracy_met': within >= ACCURACY_SHARE and
         max(r['state_steps'] for r in rows) <= 1.0,
+        '_grid': grid,          # for the node part (not written)
     }
 
 
@@ -321,13 +322,15 @@ def node_run(width: int, height: int, seconds: float, grid: Any) -> dict[str, An
                 pub = start_child([sys.executable, '-m', 'benchmarks.zoom', '--role',
                                    'publisher', '--width', str(width), '--height',
                                    str(height)], env, log_dir, f'publisher_{kind}')
-                if kind == 'node':
-                    # The grid is built at start-up (fixed sensor size): wait for frames.
-                    probe.recording = True
-                    probe.spin_until(lambda: len(probe.frames) > 0, READY_TIMEOUT_S)
-                    probe.recording = False
-                else:
-                    probe.spin_until(lambda: False, 1.0)
+                # The first frame (the node's grid is built at start-up: fixed sensor size),
+                # then a second of warm-up.
+                probe.frames.clear()
+                probe.recording = True
+                first = probe.spin_until(lambda: len(probe.frames) > 0, READY_TIMEOUT_S)
+                probe.spin_until(lambda: False, 1.0)
+                probe.recording = False
+                if not first:
+                    out['errors'].append(f'{kind}: no frame within {READY_TIMEOUT_S} s')
                 probe.record(seconds)
                 stats = latency_stats(probe.frames, seconds)
                 stats['ready'] = ready
@@ -385,6 +388,7 @@ def run(out_dir: Path = RESULTS, quick: bool = False, ros: bool = True) -> dict[
     width, height = QUICK_SIZE if quick else SIZE
     frames = 7 if quick else int(SWEEP_S * RATE_HZ) + 1
     core = strategy_and_accuracy(width, height, frames, 5 if quick else 30)
+    grid = core.pop('_grid')
     log(f"zoom: grid {core['grid']['states']} states in {core['grid']['build_s']:.1f} s, "
         f"{core['grid']['memory_mb']:.1f} MB + {core['grid']['frame_map_mb']:.1f} MB map; per "
         f"frame {core['per_frame_map_ms']:.2f} ms vs full model "
@@ -393,8 +397,7 @@ def run(out_dir: Path = RESULTS, quick: bool = False, ros: bool = True) -> dict[
     doc: dict[str, Any] = {'benchmark': 'zoom', 'machine': machine_info(), 'method': __doc__,
                            'load_1min': os.getloadavg()[0], 'core': core, 'errors': []}
     if ros:
-        node = node_run(width, height, 2.0 if quick else WINDOW_S, _grid(
-            zoom_values(width, height)).grid)
+        node = node_run(width, height, 3.0 if quick else WINDOW_S, grid)
         doc['node'] = node
         doc['errors'] += node.get('errors', [])
         relay, ours = node.get('passthrough', {}), node.get('node', {})

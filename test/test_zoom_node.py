@@ -160,3 +160,14 @@ def test_ignored_states_are_counted_in_diagnostics(running) -> None:
     assert float(diag['lens_state.zoom']) == pytest.approx(0.125)
     assert float(diag['lens_state_lag_ms']) == pytest.approx(2800.0)
     assert int(diag['lens_grid_states']) == 5
+
+
+def test_a_state_outside_the_table_is_clamped_and_warned(running) -> None:
+    client, values, proc = running
+    client.state(104, 0, ['zoom'], [5.0])
+    client.client.spin_for(0.3)
+    msg = make_image(np.zeros((H, W), np.uint8), 'mono8')
+    result = client.frame(msg, 104, 0)
+    npt.assert_allclose(result['info'].k, _exact(values, 0.125).K.ravel(), rtol=1e-6)
+    assert client.client.spin_until(
+        lambda: 'is outside lens.zoom.positions' in proc.output(), 5.0), proc.output()[-2000:]
