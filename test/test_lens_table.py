@@ -187,3 +187,22 @@ def test_model_of_a_moving_lens_and_a_refused_row(zoom_values):
     values['lens.zoom.surfaces'] = [4, 9, 30]
     with pytest.raises(ModelError, match=r'^lens\.zoom\.surfaces: 30 is not an index'):
         build_model(values, 320, 180)
+
+
+def test_zoom_cam_keeps_the_image_plane_and_spans_the_patent_range(zoom_values):
+    """tools/make_zoom_config.py solved the compensator: the image plane never moves."""
+    import math
+
+    from mechdeconv_ros.lens_source import PrescriptionSource
+
+    (zoom,) = lens_table.mechanisms(zoom_values)
+    planes, focals = [], []
+    for p in zoom.positions:
+        source = PrescriptionSource(lens_table.values_at(zoom_values, {'zoom': p}))
+        planes.append(source.image_plane(math.inf)[0])
+        focals.append(source.first_order().efl_mm)
+    assert_allclose(planes, planes[0], atol=1e-3)     # the table has 0.1 um digits
+    assert np.all(np.diff(focals) > 0)
+    # The patent's 2.5x: f = 57.2 to 143.0 mm as tabulated; its long row to 0.03 mm.
+    assert focals[-1] / focals[0] == pytest.approx(2.5, abs=0.01)
+    assert_allclose(zoom.rows[-1], [48.678, 1.536, 5.133], atol=0.03)
