@@ -39,6 +39,7 @@ from launch.actions import DeclareLaunchArgument, GroupAction, SetEnvironmentVar
 from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
+from mechdeconv_ros.graph_env import FASTDDS_PROFILE_NAME, PROFILE_VAR
 
 PACKAGE = 'mechdeconv_ros'
 
@@ -63,7 +64,7 @@ def generate_launch_description() -> LaunchDescription:
     node = GroupAction(scoped=True, forwarding=True, actions=[
         # Scoped: the variable is set for the node started in this group only.
         SetEnvironmentVariable(
-            'FASTRTPS_DEFAULT_PROFILES_FILE', os.path.join(share, 'config', 'fastdds_shm.xml'),
+            PROFILE_VAR, os.path.join(share, 'config', FASTDDS_PROFILE_NAME),
             condition=IfCondition(LaunchConfiguration('use_fastdds_profile'))),
         Node(
             package=PACKAGE, executable='correct_node', name='correct_node',

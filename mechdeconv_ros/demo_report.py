@@ -218,7 +218,7 @@ def lens_text(model: Any) -> str:
     :return: the text.
     """
     values = model.values
-    if values.get('lens.surfaces.radius_mm'):
+    if values['lens.surfaces.radius_mm']:
         gap = first_air_gap(values)
         lens = f"{len(values['lens.surfaces.radius_mm'])} surfaces"
         if gap is not None:

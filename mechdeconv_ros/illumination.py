@@ -329,7 +329,7 @@ def relative_illumination(model: Any, *, samples: int = RI_SAMPLES,
                              math.isinf(distance))
     px, py = model.pixel_mm
     corner = math.hypot((model.width - 1) / 2.0 * px, (model.height - 1) / 2.0 * py)
-    edge = math.hypot(model.width / 2.0 * px, model.height / 2.0 * py)
+    edge = model.half_diagonal_mm
     if known is not None and with_fraction:
         heights = known.height_mm
         area = known.ri * beam_area(system, np.zeros(1))[0]
@@ -579,10 +579,9 @@ def lensfun_fit(model: Any, illumination: Illumination | None = None,
     :return: the fit.
     """
     curve = illumination or model.illumination(with_fraction=False)
-    half_diagonal = math.hypot(model.width / 2.0 * model.pixel_mm[0],
-                               model.height / 2.0 * model.pixel_mm[1])
-    reach = min(1.0, _fit_end_mm(curve, float(model.values.get(
-        'output.max_vignetting_gain', 4.0)), half_diagonal) / half_diagonal)
+    half_diagonal = model.half_diagonal_mm
+    reach = min(1.0, _fit_end_mm(curve, float(model.values['output.max_vignetting_gain']),
+                                 half_diagonal) / half_diagonal)
     r = np.linspace(0.0, reach, samples)
     ri = curve.at(r * half_diagonal)
     r2 = r * r

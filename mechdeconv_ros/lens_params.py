@@ -107,7 +107,7 @@ def _surface_prescription(values: Mapping[str, Any]) -> Prescription:
 
 def _per_surface(values: Mapping[str, Any], key: str, count: int) -> list[float]:
     """Return the array ``key`` with one value per surface (empty = all 0)."""
-    array = [float(v) for v in values.get(key, [])]
+    array = [float(v) for v in values[key]]
     if not array:
         return [0.0] * count
     if len(array) != count:

@@ -45,15 +45,15 @@ from mechdeconv_ros.illumination import Illumination
 from mechdeconv_ros.lens_params import make_prescription, tolerance_keys, with_overrides
 from mechdeconv_ros.model_base import (
     FloatArray, is_prescription_mode, lens_param, ModelError, stop_param)
-from mechdeconv_ros.params import MECHANISMS
-from mechdeconv_ros.prescription import image_plane, Paraxial, paraxial, Prescription, Surface
+from mechdeconv_ros.prescription import (
+    image_plane, Paraxial, paraxial, Prescription, Surface, vertex_z)
 from mechdeconv_ros.raytrace import trace_field
 
 #: Everything a new source may need, importable from here.
 __all__ = [
-    'FirstOrder', 'FloatArray', 'Illumination', 'LensSource', 'ModelError', 'NotApplicable',
-    'Prescription', 'PrescriptionSource', 'source_from_values', 'Surface', 'ThickLensSource',
-    'TracedSource']
+    'FirstOrder', 'FloatArray', 'Illumination', 'LensSource', 'make_prescription', 'ModelError',
+    'NotApplicable', 'Prescription', 'PrescriptionSource', 'source_from_values', 'Surface',
+    'ThickLensSource', 'TracedSource', 'vertex_z', 'with_overrides']
 
 
 class NotApplicable(ValueError):
@@ -233,7 +233,7 @@ class TracedSource(LensSource):
         return FirstOrder(para.efl_mm, para.front_principal_z_mm, para.rear_principal_z_mm)
 
     def image_plane(self, distance_mm: float) -> tuple[float, float]:
-        """Return the paraxial image plane: ``n'/v = Phi - n_0/l`` (module raytrace)."""
+        """Return the paraxial image plane: ``n'/v = Phi - n_0/l`` (module prescription)."""
         if distance_mm not in self._planes:
             self._planes[distance_mm] = image_plane(self._prescription, distance_mm)
         return self._planes[distance_mm]
@@ -260,7 +260,12 @@ class TracedSource(LensSource):
         return tolerance_keys(self.values)
 
     def perturbed(self, scalars: Mapping[str, float]) -> TracedSource:
-        """Return the lens of the values with ``scalars`` overriding them."""
+        """
+        Return the lens of the values with ``scalars`` overriding them.
+
+        A subclass whose constructor takes more than the values (a joint position, a
+        wavelength) overrides this.
+        """
         return type(self)(with_overrides(self.values, scalars))
 
     def relative_illumination(self, model: Any, *, with_fraction: bool = True,
@@ -287,16 +292,11 @@ def source_from_values(values: Mapping[str, Any]) -> LensSource:
     Return the lens source the ``lens.*`` parameters describe.
 
     :param values: checked parameter values.
-    :return: a :class:`PrescriptionSource` when ``lens.surfaces.radius_mm`` is given (a
-        :class:`~mechdeconv_ros.moving_source.MovingSource` at its tables' first rows when a
-        ``lens.zoom.joint`` or ``lens.focus.joint`` moves gaps), else a
-        :class:`ThickLensSource`.
+    :return: a :class:`PrescriptionSource` when ``lens.surfaces.radius_mm`` is given, else a
+        :class:`ThickLensSource` (a lens whose groups move is picked one level up:
+        :func:`mechdeconv_ros.moving_source.source_for`).
     :raises ModelError: when the values describe no lens that focuses.
     """
-    if any(values.get(f'lens.{m}.joint') for m in MECHANISMS):
-        # Imported here: that module subclasses PrescriptionSource from this one.
-        from mechdeconv_ros.moving_source import MovingSource
-        return MovingSource(values)
     if is_prescription_mode(values):
         return PrescriptionSource(values)
     return ThickLensSource(values)

@@ -187,10 +187,6 @@ def _model_key(values: Mapping[str, Any], size: tuple[int, int]) -> tuple[Any, .
         for name in MODEL_PARAMS)
 
 
-def _size_of(active: ActiveModel) -> tuple[int, int]:
-    return (active.model.width, active.model.height)
-
-
 def _no_log(level: str, message: str) -> None:
     pass
 
@@ -263,7 +259,7 @@ class LiveModel:
         if sensor_size_fixed(self._values):
             # The size is known: build the maps now, so the first frame is not late.
             with self._lock:
-                self._input_size = _size_of_model(self.startup_model)
+                self._input_size = _image_size(self.startup_model)
                 self._install_locked(self._finish(self.startup_model, 0, 0.0))
 
     def _say(self, level: str, message: str) -> None:
@@ -363,7 +359,7 @@ class LiveModel:
         :raises FrameDropped: when the frame must be dropped (the reason says why).
         """
         active = self._active                       # read the reference once
-        if active is not None and _size_of(active) == (width, height):
+        if active is not None and _image_size(active.model) == (width, height):
             return active
         with self._lock:
             values, generation = dict(self._values), self._values_generation
@@ -505,7 +501,7 @@ class LiveModel:
                  size: tuple[int, int] | None, active: ActiveModel | None) -> None:
         """Build and install the model of the newest accepted values (rebuild thread)."""
         if active is not None and active.values_generation == generation \
-                and _size_of(active) == size:
+                and _image_size(active.model) == size:
             return          # a burst was coalesced into a build that is already in use
         if size is None and not sensor_size_fixed(values):
             return          # no frame yet: the first frame builds with the newest values
@@ -560,9 +556,9 @@ class LiveModel:
         of :func:`mechdeconv_ros.graph_env.keep_large_buffers`, the dropped buffers stay in
         the heap for that rebuild.
         """
-        if active is None or self._warmed_size == _size_of(active):
+        if active is None or self._warmed_size == _image_size(active.model):
             return
-        self._warmed_size = _size_of(active)
+        self._warmed_size = _image_size(active.model)
         try:
             self._build_maps(active.model)
         except Exception as err:    # noqa: B902 - an optimisation must never stop the thread
@@ -605,7 +601,7 @@ class LiveModel:
         """
         current = self._active
         if (current is not None and current.values_generation >= candidate.values_generation
-                and _size_of(current) == _size_of(candidate)):
+                and _image_size(current.model) == _image_size(candidate.model)):
             return current
         self._revision += 1
         self._rebuilds += 1
@@ -624,7 +620,8 @@ class LiveModel:
         return installed
 
 
-def _size_of_model(model: Any) -> tuple[int, int]:
+def _image_size(model: Any) -> tuple[int, int]:
+    """Return the (width, height) in px a model was built for."""
     return (int(model.width), int(model.height))
 
 

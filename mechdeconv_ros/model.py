@@ -54,8 +54,9 @@ from mechdeconv_ros.equivalent import (
     boundary_points, choose_equivalent, EQUIVALENT_MAX_ERROR_PX, EquivalentFit, fit_equivalent)
 from mechdeconv_ros.illumination import Illumination
 from mechdeconv_ros.lens_params import make_prescription
-from mechdeconv_ros.lens_source import LensSource, source_from_values
-from mechdeconv_ros.model_base import FloatArray, ModelError
+from mechdeconv_ros.lens_source import LensSource
+from mechdeconv_ros.model_base import FloatArray, half_diagonal_mm, ModelError
+from mechdeconv_ros.moving_source import source_for
 from mechdeconv_ros.params import check_values, INTERPOLATIONS, MAX_FRAME_PIXELS, ParamValue
 from mechdeconv_ros.prescription import Prescription
 from mechdeconv_ros.radial_map import (
@@ -142,6 +143,11 @@ class LensModel:
         if not self._summary_cache:
             self._summary_cache.update(summarize(self))
         return self._summary_cache
+
+    @property
+    def half_diagonal_mm(self) -> float:
+        """Return the raw image's half-diagonal on the sensor (to the outer pixel edges), mm."""
+        return half_diagonal_mm(self.width, self.height, self.pixel_mm)
 
     @property
     def prescription(self) -> Prescription | None:
@@ -315,7 +321,8 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
     :param width: the incoming image width, used when ``sensor.width_px`` is 0.
     :param height: the incoming image height, used when ``sensor.height_px`` is 0.
     :param source: the lens; by default the one the ``lens.*`` values describe
-        (:func:`mechdeconv_ros.lens_source.source_from_values`).
+        (:func:`mechdeconv_ros.moving_source.source_for`: the seam's
+        ``source_from_values``, or a moving prescription when a ``lens.m.joint`` is set).
     :return: the model.
     :raises ModelError: naming the parameter at fault when the values describe no camera.
     """
@@ -325,7 +332,7 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
         name = str(err).split(':', 1)[0].split('[', 1)[0].strip(" '")
         raise ModelError(name, str(err).split(':', 1)[-1].strip()) from None
     if source is None:
-        source = source_from_values(vals)
+        source = source_for(vals)
     # The rules of every source (paraxial), then the ones on its surfaces (docs/design.md s. 7).
     f, distance, sensor_z, v = refusals.check_first_order(vals, source)
     warnings = source.check_physical(distance, sensor_z)
@@ -341,7 +348,7 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
 
     # Pass 1: trace the field by angle (theta uniform) far enough to cover the raw image (its
     # edge, not the pixel centre), or to the end of the field the lens passes.
-    edge_real = math.hypot(w / 2.0 * px, h / 2.0 * py)
+    edge_real = half_diagonal_mm(w, h, (px, py))
     theta_max = min(cap, 1.5 * edge_real / v)
     for _ in range(12):
         coarse = trace_curve(source, distance, v, theta_max * v, COARSE_SAMPLES, 'equidistant')

@@ -85,6 +85,20 @@ def scene_distance(values: Mapping[str, Any]) -> float:
     return math.inf if distance == 0.0 else distance
 
 
+def half_diagonal_mm(width: int, height: int, pixel_mm: tuple[float, float]) -> float:
+    """
+    Return the raw image's half-diagonal on the sensor, to the outer pixel edges (mm).
+
+    ``hypot(W/2 p_x, H/2 p_y)``: the real radius of the raw image's corner.
+
+    :param width: raw width, px.
+    :param height: raw height, px.
+    :param pixel_mm: pixel pitches (x, y), mm.
+    :return: the half-diagonal.
+    """
+    return math.hypot(width / 2.0 * pixel_mm[0], height / 2.0 * pixel_mm[1])
+
+
 def finite_or_none(value: float) -> float | None:
     """
     Return the value, or None where it is infinite or undefined (JSON has no inf).

@@ -114,7 +114,7 @@ def make_figure(model: LensModel) -> Any:
                   else 'ideal (equidistant, v theta)')
     ax.set_xlabel(f'{ideal_name} image height [mm]')
     ax.set_ylabel('real - ideal [px]', color='tab:blue')
-    corner = np.hypot(model.width / 2 * model.pixel_mm[0], model.height / 2 * model.pixel_mm[1])
+    corner = model.half_diagonal_mm
     ax.axvline(float(model.curve.ideal_from_real(np.array(min(corner, real[-1])))),
                color='grey', ls='--', lw=0.8, label='raw image corner')
     ax.set_title(f'traced radial distortion ({model.distortion_model}: max error '

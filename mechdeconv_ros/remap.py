@@ -194,12 +194,12 @@ class Rectifier:
         """
         self.model = model
         if vignetting is None:
-            vignetting = bool(model.values.get('output.vignetting_correction', False))
+            vignetting = bool(model.values['output.vignetting_correction'])
         self.gain: Map | None = None
         self.vignetting_warning: str | None = None
         table = None
         if vignetting:
-            max_gain = float(model.values.get('output.max_vignetting_gain', 4.0))
+            max_gain = float(model.values['output.max_vignetting_gain'])
             curve = model.illumination(with_fraction=False)
             table = _gain_table(model, curve, max_gain)
             ends = np.flatnonzero(curve.ri < 1.0 / max_gain)

@@ -40,8 +40,7 @@ def summarize(model: Any) -> dict[str, Any]:
     """
     vals = model.values
     distance = scene_distance(vals)
-    edge_real = math.hypot(model.width / 2.0 * model.pixel_mm[0],
-                           model.height / 2.0 * model.pixel_mm[1])
+    edge_real = model.half_diagonal_mm
     f = model.focal_length_mm
     source: LensSource = model.source
     tolerances = source.tolerances()
@@ -189,7 +188,7 @@ def _covered_field(model: Any, field: Mapping[str, Any]) -> dict[str, Any]:
 
     half_w = model.width / 2.0 * model.pixel_mm[0]
     half_h = model.height / 2.0 * model.pixel_mm[1]
-    corner = math.hypot(half_w, half_h)
+    corner = model.half_diagonal_mm
     ideal = math.hypot(model.out_width / 2.0 / model.K_new[0, 0],
                        model.out_height / 2.0 / model.K_new[1, 1]) * model.image_distance_mm
     curve = model.curve

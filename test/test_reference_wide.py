@@ -27,9 +27,6 @@ Asserted:
 When optiland is installed, a few values are re-traced live, and our own chief rays past
 the reach of optiland's aimer are launched in optiland, which lands them where we do.
 
-Tests that need aspheric surfaces or a trace beyond 90 deg check that capability in the
-package (``lens.surfaces.conic`` in the schema, a trace by field angle in raytrace) and
-skip, naming it, when it is absent.
 """
 
 from __future__ import annotations
@@ -38,7 +35,7 @@ import importlib.util
 import json
 import math
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from mechdeconv_ros import params, raytrace
 from mechdeconv_ros.model import make_prescription
@@ -58,20 +55,8 @@ CONFIGS = {lens['config']: key for key, lens in LENSES.items() if lens['config']
 PARAXIAL_RTOL = 1e-6
 CURVE_TOL_PX = 0.01
 
-#: The package knows aspheric surfaces (issue 11 item 1).
-ASPHERES = 'lens.surfaces.conic' in params.SPECS
-ASPHERE_REASON = 'aspheric surfaces (lens.surfaces.conic) are not in the parameter schema'
-
-
-def _angle_tracer() -> Callable[..., np.ndarray] | None:
-    """Return the package's chief-ray trace by field angle in rad, if it has one."""
-    function = getattr(raytrace, 'trace_field_angles', None)
-    return function if callable(function) else None
-
-
-ANGLE_TRACER = _angle_tracer()
-ANGLE_REASON = ('raytrace has no full-field chief-ray trace by field angle (issue 11 item 2): '
-                'the tangent-parametrised aiming loses wide-angle chief rays')
+#: The package's chief-ray trace by field angle in rad (it passes 90 deg).
+ANGLE_TRACER = raytrace.trace_field_angles
 
 
 def is_aspheric(lens: dict[str, Any]) -> bool:
@@ -84,10 +69,8 @@ def values_of(lens: dict[str, Any], clear_apertures: bool = True) -> dict[str, A
     """Return full parameter values describing the lens (schema defaults elsewhere)."""
     values = params.defaults()
     for name, value in lens['params'].items():
-        if name in params.SPECS:
-            values[name] = value
-        elif any(value):                # an aspheric term the schema cannot carry
-            pytest.skip(ASPHERE_REASON)
+        assert name in params.SPECS, f'{name} is not a parameter'
+        values[name] = value
     if not clear_apertures:
         values['lens.surfaces.semi_diameter_mm'] = []
     return values
@@ -107,20 +90,11 @@ def traced(p: Prescription, angles_deg: np.ndarray) -> np.ndarray:
     """
     Return our real chief-ray heights on the paraxial focal plane at object-space angles.
 
-    Below 89 deg through the tangent; at and beyond it only through the package's trace by
-    field angle (the test skips those angles when the package has none).
+    The package's trace by field angle, which reaches past 90 deg.
     """
     sensor_z, _ = image_plane(p, math.inf)
     angles = np.asarray(angles_deg, dtype=float)
-    if ANGLE_TRACER is not None:
-        return np.asarray(ANGLE_TRACER(p, math.inf, sensor_z, np.radians(angles)), dtype=float)
-    return raytrace.trace_chief_rays(p, math.inf, sensor_z, np.tan(np.radians(angles)))
-
-
-def reachable(lens: dict[str, Any]) -> np.ndarray:
-    """Return a mask of the reference angles this package can trace (all, or < 89 deg)."""
-    angles = np.asarray(lens['curve']['field_angle_deg'])
-    return np.ones(angles.shape, bool) if ANGLE_TRACER is not None else angles < 89.0
+    return np.asarray(ANGLE_TRACER(p, math.inf, sensor_z, np.radians(angles)), dtype=float)
 
 
 def test_provenance_and_coverage() -> None:
@@ -189,14 +163,12 @@ def test_paraxial_data(key: str) -> None:
     assert_allclose(p.stop_z_mm, lens['prescription']['stop_z_mm'], rtol=0, atol=1e-12)
 
 
-@pytest.mark.skipif(ANGLE_TRACER is None, reason=ANGLE_REASON)
 @pytest.mark.parametrize('key', KEYS, ids=KEYS)
 def test_whole_field_curve(key: str, record_property: Any) -> None:
     """Real chief-ray heights agree within 0.01 px from the axis to optiland's reach."""
     lens = LENSES[key]
-    mask = reachable(lens)
-    angles = np.asarray(lens['curve']['field_angle_deg'])[mask]
-    ref = np.asarray(lens['curve']['real_height_mm'])[mask]
+    angles = np.asarray(lens['curve']['field_angle_deg'])
+    ref = np.asarray(lens['curve']['real_height_mm'])
     ours = traced(prescription_of(lens, clear_apertures=False), angles)
     assert not np.any(np.isnan(ours)), \
         f'our tracer lost rays optiland traced (from {angles[np.isnan(ours)][0]:.2f} deg)'
@@ -213,7 +185,6 @@ def test_whole_field_curve(key: str, record_property: Any) -> None:
     assert np.max(np.abs(distortion)) > 100 * CURVE_TOL_PX
 
 
-@pytest.mark.skipif(ANGLE_TRACER is None, reason=ANGLE_REASON)
 def test_fisheye_field_ends_where_its_surfaces_cross() -> None:
     """
     Both tracers follow the fisheye past 90 deg and end its field at the same angle.
@@ -233,14 +204,12 @@ def test_fisheye_field_ends_where_its_surfaces_cross() -> None:
     assert abs(end - lens['optiland_reach_deg']) < 0.03
 
 
-@pytest.mark.skipif(ANGLE_TRACER is None, reason=ANGLE_REASON)
 @pytest.mark.parametrize('key', KEYS, ids=KEYS)
 def test_clear_apertures_pass_the_design_field(key: str) -> None:
     """With its clear semi-diameters the lens passes its whole design field, then clips."""
     lens = LENSES[key]
-    mask = reachable(lens)
     angles = np.asarray(lens['curve']['field_angle_deg'])
-    inside = mask & (angles <= lens['design_field_deg'])
+    inside = angles <= lens['design_field_deg']
     ours = traced(prescription_of(lens), angles[inside])
     assert np.all(np.isfinite(ours)), 'a clear aperture clips a chief ray of the design field'
     assert_allclose((ours - np.asarray(lens['curve']['real_height_mm'])[inside])
@@ -312,9 +281,8 @@ def test_aspheres_against_hand_trace(key: str, record_property: Any) -> None:
     worst = float(np.max(np.abs(hand - ref)) / pixel_mm(lens))
     record_property('optiland_vs_hand_max_px', worst)
     assert worst < CURVE_TOL_PX
-    if ASPHERES and ANGLE_TRACER is not None:
-        ours = traced(prescription_of(lens, clear_apertures=False), angles)
-        assert_allclose((ours - hand) / pixel_mm(lens), 0.0, rtol=0, atol=1e-6)
+    ours = traced(prescription_of(lens, clear_apertures=False), angles)
+    assert_allclose((ours - hand) / pixel_mm(lens), 0.0, rtol=0, atol=1e-6)
 
 
 # --- live re-check with optiland, when it is installed -----------------------------------
@@ -351,7 +319,6 @@ def test_live_optiland_recheck(generator: Any, key: str) -> None:
                     atol=1e-9)
 
 
-@pytest.mark.skipif(ANGLE_TRACER is None, reason=ANGLE_REASON)
 @pytest.mark.parametrize('key', ['wide_angle_160'], ids=['wide_angle_160'])
 def test_live_optiland_confirms_our_rays_past_its_reach(generator: Any, key: str) -> None:
     """
@@ -393,7 +360,6 @@ def test_live_optiland_confirms_our_rays_past_its_reach(generator: Any, key: str
                     atol=1e-3 * CURVE_TOL_PX * pixel_mm(lens))
 
 
-@pytest.mark.skipif(ANGLE_TRACER is None, reason=ANGLE_REASON)
 @pytest.mark.parametrize('key', ['wide_angle_160', 'fisheye_170'],
                          ids=['wide_angle_160', 'fisheye_170'])
 def test_isolated_wide_fields_trace_as_in_a_dense_batch(key: str) -> None:
@@ -410,7 +376,6 @@ def test_isolated_wide_fields_trace_as_in_a_dense_batch(key: str) -> None:
                     atol=CURVE_TOL_PX * pixel_mm(lens))
 
 
-@pytest.mark.skipif(ANGLE_TRACER is None, reason=ANGLE_REASON)
 @pytest.mark.parametrize('key', ['wide_angle_160', 'fisheye_170'])
 def test_sparse_batch_traces_as_a_dense_one(key: str) -> None:
     """Three fields from the axis to the design field, traced together, land as optiland's."""
@@ -425,7 +390,6 @@ def test_sparse_batch_traces_as_a_dense_one(key: str) -> None:
                     atol=CURVE_TOL_PX * pixel_mm(lens))
 
 
-@pytest.mark.skipif(ANGLE_TRACER is None, reason=ANGLE_REASON)
 @pytest.mark.parametrize('distance', [math.inf, 500.0], ids=['infinity', '500mm'])
 @pytest.mark.parametrize('key', ['wide_angle_160', 'fisheye_170'])
 def test_an_angle_traces_alike_in_any_batch(key: str, distance: float) -> None:

@@ -161,8 +161,6 @@ def test_cli_info_and_exports(capsys, tmp_path):
     assert main(['vignetting', '--params', CASE2]) == 2
 
 
-@pytest.mark.skipif(not (ROOT / 'config' / 'fisheye.yaml').exists(),
-                    reason='no config/fisheye.yaml')
 def test_lensfun_fit_stops_at_the_fisheye_image_circle(capsys):
     model = build_model(load_params_file(ROOT / 'config' / 'fisheye.yaml'))
     curve = model.illumination()
