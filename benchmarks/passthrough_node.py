@@ -20,7 +20,10 @@ publish, the cost every Python relay pays per frame.
 * ``remap``: the same with ``Rectifier.correct`` (Case 2 model of the frame's size, built at
   the first frame) instead of the copy;
 * ``info``: and publish ``camera_info`` (the model's prebuilt message, restamped);
-* ``info_rect``: and ``camera_info_rect``.
+* ``info_rect``: and ``camera_info_rect``;
+* ``remap_fixed``: a side variant of ``remap``, the maps converted to CV_16SC2 + CV_16UC1
+  (correct_node keeps them as two CV_32FC1: which is faster in a running relay, with the
+  caches shared between frames, is measured, not assumed).
 
 What remains between the last rung and ``correct_node`` is the node itself: the live model's
 reference read, counters, diagnostics timer, parameter callbacks, matched-event waitables and
@@ -55,7 +58,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 
 #: The rungs of ``--upto``, each adding one stage to the one before.
-RUNGS = ('relay', 'copy', 'remap', 'info', 'info_rect')
+RUNGS = ('relay', 'copy', 'remap', 'info', 'info_rect', 'remap_fixed')
 CASE2_YAML = Path(__file__).resolve().parents[1] / 'config' / 'case2.yaml'
 
 
@@ -70,7 +73,8 @@ class PassthroughNode(Node):
         """
         super().__init__('passthrough_node')
         self.frames = 0
-        self._rung = RUNGS.index(upto)
+        self._fixed_point = upto == 'remap_fixed'
+        self._rung = RUNGS.index('remap' if self._fixed_point else upto)
         self._stage_clock = stage_clock_from_env()
         self._stats = FrameStats()
         self._pool = OutputImagePool()
@@ -89,7 +93,8 @@ class PassthroughNode(Node):
             values = load_params_file(CASE2_YAML)
             values.update({'sensor.width_px': 0, 'sensor.height_px': 0})
             model = build_model(values, width, height)
-            self._model = ((width, height), Rectifier(model), camera_infos_from_model(model))
+            self._model = ((width, height), Rectifier(model, fixed_point=self._fixed_point),
+                           camera_infos_from_model(model))
         return self._model
 
     def _on_image(self, msg: Image) -> None:

@@ -8,8 +8,10 @@ the Makefile's malloc settings in every process (a child benchmark process per r
 :mod:`benchmarks.node_latency`, whose publisher and probe it uses). For each frame size, in
 interleaved rounds (the order of the rungs reverses every round), each rung of
 :mod:`benchmarks.passthrough_node` (``relay``, ``copy``, ``remap``, ``info``, ``info_rect``:
-each adds one of correct_node's stages, with the node's code) and ``correct_node`` itself
-run one at a time between the same publisher and probe, every process with
+each adds one of correct_node's stages, with the node's code), ``correct_node`` itself and
+the side rung ``remap_fixed`` (``remap`` with fixed-point maps: the map form is chosen on
+what it costs in a running relay, caches shared between frames) run one at a time between
+the same publisher and probe, every process with
 ``MECHDECONV_STAGE_TIMES`` set (:mod:`mechdeconv_ros.stage_clock`):
 
 * **receive** = callback entry - ``header.stamp`` (publisher's wall clock at publish): the
@@ -62,11 +64,12 @@ from mechdeconv_ros.stage_clock import ENV as STAGE_ENV
 SIZES = ((1280, 720), (1920, 1080))
 QUICK_SIZES = ((320, 240),)
 RATE_HZ = 30.0
-RUNGS = ('relay', 'copy', 'remap', 'info', 'info_rect', 'node')
+RUNGS = ('relay', 'copy', 'remap', 'info', 'info_rect', 'node', 'remap_fixed')
 #: Column titles of the rungs.
 RUNG_TITLES = {'relay': 'relay', 'copy': '+ read, copy', 'remap': '+ remap (no copy)',
                'info': '+ camera_info', 'info_rect': '+ camera_info_rect',
-               'node': 'correct_node', 'baseline': 'baseline correct_node'}
+               'node': 'correct_node', 'remap_fixed': 'remap, fixed-point maps (side)',
+               'baseline': 'baseline correct_node'}
 #: Row order of the stages (a rung without a stage shows '-').
 STAGES = ('receive', 'read', 'model', 'copy', 'remap', 'publish_image', 'out_hop',
           'publish_info', 'publish_info_rect', 'bookkeeping')
@@ -260,7 +263,8 @@ def measure_rung(probe: Probe, rung: str, width: int, height: int, env: Mapping[
     try:
         stage_frames = json.loads(stage_file.read_text())['frames']
     except (OSError, ValueError, KeyError):
-        result['errors'].append(f'{rung}: no stage times written')
+        if rung != 'baseline':          # another checkout may predate the stage clock
+            result['errors'].append(f'{rung}: no stage times written')
         stage_frames = []
     received = {stamp: recv for recv, stamp in frames}
     window = [f for f in stage_frames if f['stamp_ns'] in received]
@@ -278,10 +282,11 @@ def measure_rung(probe: Probe, rung: str, width: int, height: int, env: Mapping[
     return result
 
 
-def child_main(quick: bool, out_json: Path, baseline: str = '') -> int:
-    """Measure every rung at every size (this process has the shm profile)."""
+def child_main(quick: bool, out_json: Path, baseline: str = '',
+               only: Sequence[str] = RUNGS) -> int:
+    """Measure the rungs at every size (this process has the shm profile)."""
     sizes = QUICK_SIZES if quick else SIZES
-    rungs = RUNGS + (('baseline',) if baseline else ())
+    rungs = tuple(only) + (('baseline',) if baseline else ())
     rounds, window_s, warmup_s = (1, 1.0, 0.5) if quick else (ROUNDS, WINDOW_S, WARMUP_S)
     env = dict(os.environ)
     doc: dict[str, Any] = {'bare_remap': {}, 'runs': [], 'errors': []}
@@ -348,7 +353,8 @@ def evaluate(doc: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
-def run(out_dir: Path = RESULTS, quick: bool = False, baseline: str = '') -> dict[str, Any]:
+def run(out_dir: Path = RESULTS, quick: bool = False, baseline: str = '',
+        only: Sequence[str] = RUNGS) -> dict[str, Any]:
     """
     Run the stage benchmark in a child process; write ``stages.json`` into ``out_dir``.
 
@@ -357,6 +363,7 @@ def run(out_dir: Path = RESULTS, quick: bool = False, baseline: str = '') -> dic
     :param baseline: a checkout of the repository whose correct_node runs as one more rung,
         ``baseline`` (before/after comparisons in one run; its stages are timed only if it
         has the stage clock).
+    :param only: the rungs to run (default all).
     :return: the results document.
     """
     log_dir = Path(tempfile.mkdtemp(prefix='mechdeconv_bench_stages_parent_'))
@@ -366,6 +373,7 @@ def run(out_dir: Path = RESULTS, quick: bool = False, baseline: str = '') -> dic
         argv.append('--quick')
     if baseline:
         argv += ['--baseline', str(Path(baseline).resolve())]
+    argv += ['--rungs', ','.join(only)]
     child = start_child(argv, ros_env(pick_domain_id('benchmarks', 91), 'shm'), log_dir,
                         'child_stages')
     start = time.monotonic()
@@ -383,7 +391,7 @@ def run(out_dir: Path = RESULTS, quick: bool = False, baseline: str = '') -> dic
         shutil.rmtree(log_dir, ignore_errors=True)
     doc = {'benchmark': 'stages', 'machine': machine_info(), 'method': __doc__,
            'load_average_1min': os.getloadavg()[0], 'rate_hz': RATE_HZ,
-           'rungs': list(RUNGS) + (['baseline'] if baseline else []),
+           'rungs': list(only) + (['baseline'] if baseline else []),
            'stages': list(STAGES), 'bare_remap': measured['bare_remap'],
            'runs': measured['runs'], 'errors': errors}
     doc['targets'] = evaluate(doc)
@@ -396,7 +404,7 @@ def run(out_dir: Path = RESULTS, quick: bool = False, baseline: str = '') -> dic
 # ---------------------------------------------------------------------------------------------
 
 def tables(doc: Mapping[str, Any]) -> list[str]:
-    """Return the markdown of the stage tables (one per size) and the latency target."""
+    """Return the markdown: one stage table per frame size, and the latency target."""
     best = best_runs(doc['runs'])
     rungs = [r for r in doc['rungs'] if any(k[1] == r for k in best)]
     lines = ["### Where a frame's time goes (stage by stage, 30 Hz rgb8, shm profile)", '',
@@ -484,10 +492,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--out', type=Path, default=RESULTS, help='results folder')
     parser.add_argument('--baseline', default='',
                         help="another checkout's correct_node as one more rung")
+    parser.add_argument('--rungs', default=','.join(RUNGS),
+                        help='comma-separated subset of: ' + ', '.join(RUNGS))
     args = parser.parse_args(argv)
+    only = tuple(r for r in args.rungs.split(',') if r)
+    if any(r not in RUNGS for r in only):
+        parser.error(f'unknown rung in {only}')
     if args.child:
-        return child_main(args.quick, args.out_json, args.baseline)
-    doc = run(args.out, quick=args.quick, baseline=args.baseline)
+        return child_main(args.quick, args.out_json, args.baseline, only)
+    doc = run(args.out, quick=args.quick, baseline=args.baseline, only=only)
     print('\n'.join(tables(doc)))
     return 0 if not doc['errors'] else 1
 

@@ -63,16 +63,16 @@ def _quadrant_scale(model: LensModel, xn: npt.NDArray[np.float32],
     if gain_table is not None:
         table = np.stack([table, gain_table], axis=-1)
     table = np.ascontiguousarray(table[None], dtype=np.float32)
-    # One CV_32FC2 map (x = table index, y = 0 on the one-row table) for cv2.remap.
-    # x = hypot(xn, yn) v / step as sqrt(a^2 + b^2) of pre-scaled coordinates: numpy's hypot
-    # calls libm per element (5x slower at 1080p); the y channel stays 0.
-    index = np.zeros((len(yn), len(xn), 2), np.float32)
+    # The table index x = hypot(xn, yn) v / step, as sqrt(a^2 + b^2) of pre-scaled coordinates
+    # into a contiguous array (numpy's hypot calls libm per element, and writing into one
+    # channel of a CV_32FC2 map is a strided write: both several times slower at 1080p); the
+    # y map is all 0 (the one-row table), a calloc'ed array that is never written.
     scale = np.float32(v / step)
-    np.add(np.square(xn * scale)[None, :], np.square(yn * scale)[:, None], out=index[..., 0])
-    np.sqrt(index[..., 0], out=index[..., 0])
-    looked_up = cv2.remap(table, index, None, cv2.INTER_LINEAR,
+    index = np.add(np.square(xn * scale)[None, :], np.square(yn * scale)[:, None])
+    np.sqrt(index, out=index)
+    looked_up = cv2.remap(table, index, np.zeros(index.shape, np.float32), cv2.INTER_LINEAR,
                           borderMode=cv2.BORDER_CONSTANT, borderValue=(-1.0, 0.0, 0.0, 0.0))
-    outside = index[..., 0] > samples - 1
+    outside = index > samples - 1
     if gain_table is None:
         looked_up[outside] = -1.0
         return looked_up
@@ -185,12 +185,15 @@ class Rectifier:
     per model, where the gain limit ends the corrected field.
     """
 
-    def __init__(self, model: LensModel, vignetting: bool | None = None) -> None:
+    def __init__(self, model: LensModel, vignetting: bool | None = None,
+                 fixed_point: bool = False) -> None:
         """
         Build the float maps (``map1`` = x, ``map2`` = y, CV_32FC1, raw-image pixels).
 
         :param model: the lens model.
         :param vignetting: build the vignetting gain map; None = ``output.vignetting_correction``.
+        :param fixed_point: convert the maps to CV_16SC2 + CV_16UC1 (the same output; the
+            stage benchmark compares the two forms in a running relay).
         """
         self.model = model
         if vignetting is None:
@@ -210,6 +213,8 @@ class Rectifier:
                     f'inside the {curve.corner_height_mm:.3g} mm corner: the corrected field '
                     'ends there (black beyond)')
         self.map1, self.map2, self.gain = _build_maps(model, table)
+        if fixed_point:
+            self.map1, self.map2 = cv2.convertMaps(self.map1, self.map2, cv2.CV_16SC2)
         self._nearest_map: np.ndarray | None = None
         self._gains: dict[int, Map] = {}
 
@@ -240,8 +245,12 @@ class Rectifier:
         to the nearest source pixel (``cv2.convertMaps`` with ``nninterpolation``).
         """
         if self._nearest_map is None:
-            self._nearest_map = cv2.convertMaps(self.map1, self.map2, cv2.CV_16SC2,
-                                                nninterpolation=True)[0]
+            if self.map1.dtype == np.int16:         # fixed point: to the nearer 1/32 px
+                self._nearest_map = cv2.convertMaps(*cv2.convertMaps(
+                    self.map1, self.map2, cv2.CV_32FC1), cv2.CV_16SC2, nninterpolation=True)[0]
+            else:
+                self._nearest_map = cv2.convertMaps(self.map1, self.map2, cv2.CV_16SC2,
+                                                    nninterpolation=True)[0]
         return self._nearest_map
 
     @property

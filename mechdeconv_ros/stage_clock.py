@@ -62,7 +62,7 @@ class StageClock:
 
     def mark(self, stage: str) -> None:
         """
-        Close a stage: the time since the previous mark (or the start) goes to ``stage``.
+        Close a stage: the time since the previous mark, or since the start, goes to ``stage``.
 
         :param stage: the stage's name (a repeated name adds up).
         """
