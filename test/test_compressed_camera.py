@@ -54,9 +54,10 @@ def context() -> Iterator[Context]:
 def camera_overrides(**extra: object) -> list[Parameter]:
     """Return the Case 2 lens/sensor/scene parameters plus ``extra`` (dots in names: '__')."""
     values = load_params_file(CASE2)
+    # (Empty arrays would be BYTE_ARRAY overrides: the arrays keep their declared [].)
     params = [Parameter(n, value=values[n]) for n in values
               if n.startswith(('lens.', 'sensor.', 'scene.'))
-              and not n.startswith('lens.surfaces.')]
+              and not n.startswith('lens.surfaces.') and values[n] != []]
     return params + [Parameter(k.replace('__', '.'), value=v) for k, v in extra.items()]
 
 

@@ -244,8 +244,9 @@ def context() -> Iterator[Context]:
 def case2_overrides(**extra: object) -> list[Parameter]:
     """Return the camera's parameters as the Case 2 params file gives them, plus ``extra``."""
     values = load_params_file(CASE2)
+    # (Empty arrays would be BYTE_ARRAY overrides: the arrays keep their declared [].)
     names = [n for n in values if n.startswith(('lens.', 'sensor.', 'scene.'))
-             and not n.startswith('lens.surfaces.')]
+             and not n.startswith('lens.surfaces.') and values[n] != []]
     params = [Parameter(n, value=values[n]) for n in names]
     return params + [Parameter(k, value=v) for k, v in extra.items()]
 
