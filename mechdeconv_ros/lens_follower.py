@@ -4,18 +4,18 @@
 correct_node's lens_state input: JointState in, each frame's lens state and CameraInfos out.
 
 While ``lens.zoom.joint`` or ``lens.focus.joint`` is set the node subscribes to ``lens_state``
-(sensor_msgs/JointState, a relative name: remap it to ``/joint_states`` or a driver's topic;
-best effort, depth 100, which matches reliable and best-effort publishers) and keeps the
-recent positions (:class:`~mechdeconv_ros.lens_state.LensStateHistory`). For each frame
-:meth:`LensFollower.prepare` first takes every lens_state message waiting (the executor alone
-would fall behind a fast joint stream while frames keep it busy), then the state at the
-frame's header stamp, clamps it into the tables (a throttled warning), makes the moving
-rectifier use that state's map (:class:`~mechdeconv_ros.moving_maps.MovingRectifier`) and
-fills the frame's two CameraInfos with that state's K, D and P. ``/diagnostics`` gets ``lens_state.<mechanism>`` (the position a
-frame was last corrected with), ``lens_state_lag_ms`` (frame stamp minus the newest state's;
-> 0: the frame is newer than every state), ``lens_states_received``, ``lens_states_ignored``
-(no followed joint, or NaN) and ``lens_states_last_ignored``, ``lens_state_clamped_frames`` and
-the grid's size (``lens_grid_states``, ``lens_grid_memory_mb``). Executor thread only.
+(sensor_msgs/JointState, a relative name: remap it to ``/joint_states`` or a driver's topic; best
+effort, depth 100, which matches reliable and best-effort publishers) and keeps the recent
+positions (:class:`~mechdeconv_ros.lens_state.LensStateHistory`). For each frame
+:meth:`LensFollower.prepare` first takes every lens_state message waiting (the executor alone would
+fall behind a fast joint stream while frames keep it busy), then the state at the frame's header
+stamp, clamps it into the tables (a throttled warning), makes the moving rectifier use that state's
+map (:class:`~mechdeconv_ros.moving_maps.MovingRectifier`) and fills the frame's two CameraInfos
+with that state's K, D and P. ``/diagnostics`` gets ``lens_state.<mechanism>`` (the position a
+frame was last corrected with), ``lens_state_lag_ms`` (frame stamp minus the newest state's; > 0:
+the frame is newer than every state), ``lens_states_received``, ``lens_states_ignored`` (no
+followed joint, or NaN) and ``lens_states_last_ignored``, ``lens_state_clamped_frames`` and the
+grid's size (``lens_grid_states``, ``lens_grid_memory_mb``). Executor thread only.
 """
 
 from __future__ import annotations
