@@ -19,11 +19,9 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 PACKAGES = ('mechdeconv_ros', 'benchmarks')
 MAX_LINES = 800
-#: Circles that exist and are being removed elsewhere: the benchmark circle node_latency ->
-#: report -> node_latency, which another branch of issue 17 removes (the integrator drops this
-#: entry when merging it). report.py's lazy imports also close report -> speed -> report, so
-#: the component has the three modules.
-KNOWN_CIRCLES = {frozenset({'benchmarks.node_latency', 'benchmarks.report', 'benchmarks.speed'})}
+#: Circles that exist and are being removed elsewhere (none: the benchmarks' circle
+#: node_latency -> report -> node_latency / speed was removed on branch perf, issue 21).
+KNOWN_CIRCLES: set[frozenset[str]] = set()
 
 
 def modules() -> dict[str, Path]:
