@@ -13,9 +13,10 @@ correction is on (``vignetting_correction``; its gain-limit warning joins the mo
 warnings). The input is named by ``image_transport`` and ``input_topic``; with compressed
 input, ``frames_undecodable`` counts refused payloads and ``decode_time_ms_{mean,max,last}``
 time the JPEG/PNG decoding (included in ``frame_time_ms_*``); ``frames_out_compressed`` counts
-the frames published on ``image_rect/compressed``. Level: ERROR while the last rebuild failed
-(the previous model stays in use), WARN for the model's warnings or frames that all fail, OK
-otherwise.
+the frames published on ``image_rect/compressed``; ``FrameStats.extra`` adds the entries of
+the ``lens_state`` input of a moving lens (:mod:`mechdeconv_ros.lens_follower`). Level: ERROR
+while the last rebuild failed (the previous model stays in use), WARN for the model's warnings
+or frames that all fail, OK otherwise.
 """
 
 from __future__ import annotations
