@@ -11,8 +11,9 @@ Run every benchmark (``make bench``) and write the full measured tables.
 Waits (up to ``--wait-load`` seconds, default 600) for the 1-minute load average to drop
 below 0.5, so the timings are taken on a quiet machine; then runs :mod:`benchmarks.accuracy`,
 :mod:`benchmarks.speed`, :mod:`benchmarks.node_latency`, :mod:`benchmarks.stages`,
-:mod:`benchmarks.wide`, :mod:`benchmarks.vignetting`, :mod:`benchmarks.colour` and
-:mod:`benchmarks.compressed_input`, each writing its
+:mod:`benchmarks.wide`, :mod:`benchmarks.vignetting`, :mod:`benchmarks.colour`,
+:mod:`benchmarks.compressed_input` and :mod:`benchmarks.zoom` (a moving zoom lens), each
+writing its
 ``results/<name>.json`` and figures, and finally prints the markdown tables (made by
 :mod:`benchmarks.report`) and writes them to ``results/README_tables.md`` and to
 ``docs/benchmarks.md`` (a generated file: the machine line at the top, figure links relative
@@ -33,7 +34,7 @@ from typing import Any, Callable
 
 from benchmarks import (
     accuracy, colour, compressed_input, node_latency, report, speed, stages, vignetting,
-    wide)
+    wide, zoom)
 from benchmarks.common import log, RESULTS, wait_for_low_load
 from benchmarks.report import machine_info, machine_line, write_json
 
@@ -48,6 +49,7 @@ BENCHMARKS: dict[str, tuple[Callable[..., Any], Callable[[Any], list[str]]]] = {
     'compressed': (compressed_input.run,
                    lambda doc: ['### Compressed input (JPEG q90 at 30 Hz)', '',
                                 compressed_input.table(doc), '']),
+    'zoom': (zoom.run, zoom.tables),
 }
 #: The generated page of full tables.
 DOCS_PAGE = Path(__file__).resolve().parents[1] / 'docs' / 'benchmarks.md'

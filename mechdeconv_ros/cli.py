@@ -14,9 +14,12 @@ Commands::
     mechdeconv import TABLE.csv --focal-length-mm F -o lens.yaml
 
 ``--params`` takes a ROS 2 params file (``/**: ros__parameters:``) such as config/case2.yaml;
-``-p name=value`` overrides one parameter. Bad input prints one line naming the parameter or
-file and exits with status 2. ``correct --bayer rggb`` (or bggr, gbrg, grbg) reads each input as
-a raw one-channel 8- or 16-bit Bayer mosaic, demosaics it with the ``debayer`` parameter
+``-p name=value`` overrides one parameter; ``--lens-state zoom=X[,focus=Y]`` evaluates a lens
+whose groups move (``lens.zoom.joint`` / ``lens.focus.joint``) at those joint positions, with
+the node's interpolation (linear between table rows, clamped outside with a warning; default
+the first rows). Bad input prints one line naming the parameter or file and exits with status
+2. ``correct --bayer rggb`` (or bggr, gbrg, grbg) reads each input as a raw one-channel 8- or
+16-bit Bayer mosaic, demosaics it with the ``debayer`` parameter
 (:mod:`mechdeconv_ros.debayer`) and writes the corrected colour image.
 """
 
@@ -28,7 +31,9 @@ from pathlib import Path
 import sys
 from typing import Any, Sequence
 
+from mechdeconv_ros.lens_table import mechanisms, parse_lens_state
 from mechdeconv_ros.model import build_model, camera_info_yaml, LensModel, ModelError
+from mechdeconv_ros.moving_source import MovingSource
 from mechdeconv_ros.params import BAYER_PATTERNS, check_values, load_params_file, SPECS
 import numpy as np
 import yaml
@@ -72,10 +77,31 @@ def _model(args: argparse.Namespace, width: int = 0, height: int = 0) -> LensMod
     if not (values['sensor.width_px'] or width) or not (values['sensor.height_px'] or height):
         raise UsageError('sensor.width_px: the image size is unknown; give --width and '
                          '--height or set sensor.width_px and sensor.height_px')
-    model = build_model(values, width, height)
+    model = build_model(values, width, height, source=_moving_source(args, values))
     if getattr(args, 'func', None) is not cmd_info:     # info lists them in its report
         _warn_once(args, model.warnings)
     return model
+
+
+def _moving_source(args: argparse.Namespace, values: dict[str, Any]) -> MovingSource | None:
+    """Return the lens at ``--lens-state`` (None without the option: the default source)."""
+    text = getattr(args, 'lens_state', None)
+    if not text:
+        return None
+    try:
+        state = parse_lens_state(text)
+    except ValueError as err:
+        raise UsageError(str(err)) from None
+    moving = {m.name: m for m in mechanisms(values)}
+    for name, position in state.items():
+        if name not in moving:
+            raise UsageError(f'--lens-state: {name} does not move (lens.{name}.joint is not set)')
+        mech = moving[name]
+        if mech.clamped(position):
+            _warn_once(args, [f'lens.{name}: joint position {position:g} is outside '
+                              f'lens.{name}.positions ({mech.positions[0]:g} to '
+                              f'{mech.positions[-1]:g}): the nearest row is used'])
+    return MovingSource(values, state)
 
 
 def _warn_once(args: argparse.Namespace, warnings: Sequence[str]) -> None:
@@ -91,10 +117,15 @@ def cmd_info(args: argparse.Namespace) -> int:
     """Print every derived quantity of the model."""
     model = _model(args)
     report = model.report()
+    state = getattr(model.source, 'state', None)
+    if state:
+        report['lens_state'] = state
     if args.json:
         json.dump(report, sys.stdout, indent=2, allow_nan=False)
         sys.stdout.write('\n')
         return 0
+    if state:
+        print('lens state: ' + ', '.join(f'{k} = {v:g}' for k, v in state.items()))
     print(format_report(report))
     return 0
 
@@ -362,6 +393,9 @@ def build_parser() -> argparse.ArgumentParser:
                          help='ROS 2 params file (e.g. config/case2.yaml); default: Case 2')
         cmd.add_argument('-p', '--param', action='append', metavar='NAME=VALUE',
                          help='override one parameter, e.g. -p lens.stop_offset_mm=0.5')
+        cmd.add_argument('--lens-state', metavar='zoom=X[,focus=Y]',
+                         help='joint positions of a lens whose groups move (lens.zoom.joint, '
+                              "lens.focus.joint); default: the tables' first rows")
         if sized:
             cmd.add_argument('--width', type=int, help='image width in px')
             cmd.add_argument('--height', type=int, help='image height in px')

@@ -63,8 +63,11 @@ from mechdeconv_ros.frame_io import (
     read_compressed, read_image, sensor_qos)
 from mechdeconv_ros.image_msgs import camera_infos_from_model, Encoding, OutputImagePool
 from mechdeconv_ros.lateral_color import COLOUR_ORDER
+from mechdeconv_ros.lens_follower import LensFollower
 from mechdeconv_ros.live_model import (  # noqa: F401 - MAX_SURFACES: the node's limit
     changes_of, FrameDropped, LiveModel, MAX_SURFACES)
+from mechdeconv_ros.model import build_model
+from mechdeconv_ros.moving_maps import is_moving, moving_rectifier, MovingRectifier
 from mechdeconv_ros.node_main import log_function, run_node
 from mechdeconv_ros.param_services import guard_parameter_services
 from mechdeconv_ros.params import SCHEMA
@@ -113,12 +116,16 @@ class CorrectNode(Node):
         self._colourless_noted: set[str] = set()
         self._lateral_logged: Any = None
         self._warned_model: Any = None
+        self._moving_cache: MovingRectifier | None = None
         self._compressed_wanted = False     # image_rect/compressed has a subscriber
         self._stage_clock = stage_clock_from_env()    # None unless MECHDECONV_STAGE_TIMES is set
         super().__init__('correct_node', **kwargs)
         self._live = LiveModel(
             declare_schema(self, SCHEMA), extras=camera_infos_from_model, log=log_function(self),
             build_maps=self._build_maps)
+        # Issue 19: lens_state (JointState) while a lens.zoom/focus joint moves gaps.
+        self._follower = LensFollower(self, self._stats)
+        self._follower.configure(self._live.values())
         guard_parameter_services(self, self._live.start_requested_rebuild,
                                  bool(kwargs.get('allow_undeclared_parameters', False)))
         self._apply_threads()
@@ -182,6 +189,8 @@ class CorrectNode(Node):
             self._apply_threads()
         if 'lazy_subscription' in changed:
             self._update_subscription()
+        if any(name.startswith(('lens.zoom.', 'lens.focus.')) for name in changed):
+            self._follower.configure(self._live.values())
         if changed & set(COMPRESSED_PARAMS):
             self._compressed_settings = compressed_settings(self._live.value)
         if 'debayer' in changed:
@@ -198,6 +207,8 @@ class CorrectNode(Node):
         (one int, read here as a hint); ``_warned_model`` only suppresses a repeated log line,
         so a race between the two callers at worst logs it twice.
         """
+        if is_moving(model):
+            return self._moving_maps(model)
         rectifier = Rectifier(model)
         if rectifier.colour is not None:   # lateral colour (issue #20)
             rectifier.prepare_colours(self._colours)
@@ -216,6 +227,28 @@ class CorrectNode(Node):
             if rectifier.vignetting_warning and model is not self._warned_model:
                 self._warned_model = model
                 self.get_logger().warning(rectifier.vignetting_warning)
+        return rectifier
+
+    def _moving_maps(self, model: Any) -> MovingRectifier:
+        """
+        Build the grid of a moving lens (issue 19; seconds: one model per grid state).
+
+        Same threads as ``_build_maps``; the allocator warm-up asks again for the model in
+        use, which gets the grid it has (``_moving_cache``: one reference, swapped whole).
+        """
+        cached = self._moving_cache
+        if cached is not None and cached.model is model:
+            return cached
+        start = time.perf_counter()
+        rectifier = moving_rectifier(model, build_model)
+        grid = rectifier.grid
+        self.get_logger().info(
+            f'moving lens: {len(grid.cameras)} lens states precomputed in '
+            f'{time.perf_counter() - start:.1f} s, {grid.memory_bytes / 1e6:.1f} MB '
+            f'(+ {grid.frame_map_bytes / 1e6:.1f} MB per-frame map)')
+        if rectifier.vignetting_warning:
+            self.get_logger().warning(rectifier.vignetting_warning)
+        self._moving_cache = rectifier
         return rectifier
 
     def _apply_threads(self) -> None:
@@ -273,6 +306,10 @@ class CorrectNode(Node):
         try:
             model = active.model
             out = self._pool.get(model.out_width, model.out_height, encoding.name)
+            infos = active.extras
+            if isinstance(active.rectifier, MovingRectifier):
+                # Issue 19: the map, K, D and P of the lens state at this frame's stamp.
+                infos = self._follower.prepare(header, active.rectifier)
             if clock is not None:
                 clock.mark('model')
             # Depth is never gain-corrected (a distance divided by RI means nothing).
@@ -286,7 +323,7 @@ class CorrectNode(Node):
             self._pub_image.publish(out.msg)
             if clock is not None:
                 clock.mark('publish_image')
-            info_raw, info_rect = active.extras
+            info_raw, info_rect = infos
             info_raw.header = header
             self._pub_info.publish(info_raw)
             if clock is not None:

@@ -30,6 +30,13 @@ model's corrected image and mapped with that model's ``K_new`` (normalised coord
 later lens (another focal length, stop offset) therefore sees the same chart at another scale
 and distortion, as a real camera would.
 
+A lens whose groups move (``lens.zoom.joint`` / ``lens.focus.joint``, issue 19) is swept:
+every moving mechanism runs through its table and back, one way in ``lens_sweep_s``
+seconds; each tick publishes ``lens_state`` (sensor_msgs/JointState: the joints and their
+positions) and then the frame, both with the same stamp, the frame rendered at that state
+(the chart through the model of that state, interpolated over a grid of states as the node
+does, :func:`mechdeconv_ros.moving_maps.render_grid`; built at start-up, seconds).
+
 Publishing follows docs/design.md section 4.4 (pixels in and out of rclpy): one ``Image`` per
 size and encoding, ``data`` set once to ``array.array('B', bytes(n))`` and written through a
 numpy view (:func:`mechdeconv_ros.image_msgs.new_output_image`). The chart is static, so the
@@ -46,6 +53,7 @@ import cv2
 from mechdeconv_ros.compressed import CODECS, DEFAULT_JPEG_QUALITY, DEFAULT_PNG_LEVEL, encode
 from mechdeconv_ros.image_msgs import ImageFormatError, new_output_image, OutputImage
 from mechdeconv_ros.model import build_model, LensModel, ModelError
+from mechdeconv_ros.moving_maps import is_moving, MovingMaps, render_grid
 from mechdeconv_ros.node_main import run_node
 from mechdeconv_ros.params import check_values, load_params_file, ParamSpec, SCHEMA
 from mechdeconv_ros.plots import grid_image
@@ -59,7 +67,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
-from sensor_msgs.msg import CompressedImage
+from sensor_msgs.msg import CompressedImage, JointState
 
 #: Schema groups the camera declares: what defines the lens, the sensor and the scene.
 CAMERA_GROUPS = ('lens', 'sensor', 'scene')
@@ -223,6 +231,11 @@ class DemoCamera(Node):
                       ParameterType.PARAMETER_STRING)
         self._declare('rate_hz', 30.0, 'Publishing rate [Hz].', ParameterType.PARAMETER_DOUBLE,
                       float_range=(0.1, 1000.0))
+        self._declare('lens_sweep_s', 4.0, 'A lens whose groups move (lens.zoom.joint, '
+                      'lens.focus.joint) runs through its tables and back, one way in this '
+                      'many seconds; 0 = it stays at the first rows. Read once at start-up.',
+                      ParameterType.PARAMETER_DOUBLE, float_range=(0.0, 3600.0),
+                      read_only=True)
         self._declare('frame_id', 'camera_optical_frame',
                       'header.frame_id of the images (REP-103 optical frame).',
                       ParameterType.PARAMETER_STRING)
@@ -256,6 +269,15 @@ class DemoCamera(Node):
             type(self._out.msg) if self._compressed is None else CompressedImage, topic,
             qos_profile_sensor_data,
             qos_overriding_options=QoSOverridingOptions.with_default_policies())
+        self._sweep: MovingMaps | None = None
+        self._sweep_s = float(self.get_parameter('lens_sweep_s').value)
+        if is_moving(self._model) and self._sweep_s > 0.0:
+            if self._compressed is not None:
+                raise ValueError('transport: a moving lens is rendered per frame, raw only')
+            self._sweep = render_grid(self._model, build_model, self._chart.camera_matrix(
+                float(self._values['scene.distance_mm'])))
+            self._lens_pub = self.create_publisher(JointState, 'lens_state', 10)
+            self._sweep_start = self.get_clock().now().nanoseconds
         self._timer = self.create_timer(1.0 / float(self._values['rate_hz']), self._tick)
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._post_set)
@@ -295,7 +317,8 @@ class DemoCamera(Node):
 
     @staticmethod
     def _model_values(values: dict[str, Any]) -> dict[str, Any]:
-        return {spec.name: (list(values[spec.name]) if spec.type == 'double_array'
+        return {spec.name: (list(values[spec.name])
+                            if spec.type in ('double_array', 'integer_array')
                             else values[spec.name]) for spec in camera_specs()}
 
     def _build(self, values: dict[str, Any]) -> LensModel:
@@ -392,8 +415,27 @@ class DemoCamera(Node):
 
     def _tick(self) -> None:
         msg = self._out.msg if self._compressed is None else self._compressed
-        msg.header.stamp = self.get_clock().now().to_msg()
+        now = self.get_clock().now()
+        msg.header.stamp = now.to_msg()
+        if self._sweep is not None:
+            self._render_state(now.nanoseconds, msg.header.stamp)
         self._publisher.publish(msg)
+
+    def _render_state(self, now_ns: int, stamp: Any) -> None:
+        """Publish the lens state of this tick and render the frame at it."""
+        grid = self._sweep
+        phase = ((now_ns - self._sweep_start) * 1e-9 / self._sweep_s) % 2.0
+        phase = phase if phase <= 1.0 else 2.0 - phase
+        state = {m.name: float(a[0] + (a[-1] - a[0]) * phase)
+                 for m, a in zip(grid.mechanisms, grid.axes)}
+        joints = JointState(name=[m.joint for m in grid.mechanisms],
+                            position=[state[m.name] for m in grid.mechanisms])
+        joints.header.stamp = stamp
+        self._lens_pub.publish(joints)
+        _, full = grid.at(state)
+        rgb = cv2.remap(self._chart.texture, full, None, cv2.INTER_LINEAR,
+                        borderMode=cv2.BORDER_CONSTANT, borderValue=(WALL, WALL, WALL))
+        np.copyto(self._out.pixels, convert_rgb(rgb, str(self._values['encoding'])))
 
 
 def main(args: Sequence[str] | None = None) -> None:

@@ -22,7 +22,7 @@ from rcl_interfaces.srv import SetParametersAtomically
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
-from sensor_msgs.msg import CameraInfo, CompressedImage, Image
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image, JointState
 
 
 class Monitor(Node):
@@ -40,6 +40,7 @@ class Monitor(Node):
         self.lock = threading.Lock()
         self.frames: list[tuple[float, float]] = []     # (receive monotonic s, latency ms)
         self.last_rect: Image | None = None
+        self._recent_rects: list[Image] = []            # the last few, for a raw's pair
         self.info_d: tuple[float, ...] | None = None
         self.d_changed_from: tuple[float, ...] | None = None
         self.d_changed_at: float | None = None          # monotonic s
@@ -48,10 +49,12 @@ class Monitor(Node):
         self.diag_message = ''
         self.frames_in: list[tuple[float, int]] = []    # (receive monotonic s, node input)
         self.raw_wanted: list[Image | CompressedImage] = []
+        self.lens_states: dict[int, dict[str, float]] = {}     # stamp ns -> joint positions
         qos = qos_profile_sensor_data
         self.create_subscription(Image, 'image_rect', self._on_rect, qos)
         self.create_subscription(CameraInfo, 'camera_info', self._on_info, qos)
         self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, qos)
+        self.create_subscription(JointState, 'lens_state', self._on_lens_state, 10)
         self.param_clients = {
             name: self.create_client(SetParametersAtomically,
                                      f'/{name}/set_parameters_atomically')
@@ -62,6 +65,7 @@ class Monitor(Node):
         with self.lock:
             self.frames.append((time.monotonic(), latency_ms))
             self.last_rect = msg
+            self._recent_rects = self._recent_rects[-15:] + [msg]
 
     def _on_info(self, msg: CameraInfo) -> None:
         d = tuple(float(v) for v in msg.d)
@@ -80,6 +84,23 @@ class Monitor(Node):
                     self.diag_message = status.message
                     if self.diag.get('frames_in', '').isdigit():
                         self.frames_in.append((time.monotonic(), int(self.diag['frames_in'])))
+
+    def _on_lens_state(self, msg: JointState) -> None:
+        with self.lock:
+            self.lens_states[stamp_ns(msg.header.stamp)] = dict(zip(msg.name, msg.position))
+            if len(self.lens_states) > 512:
+                for stamp in sorted(self.lens_states)[:256]:
+                    del self.lens_states[stamp]
+
+    def recent_rects(self) -> list[Image]:
+        """Return the last 16 image_rect frames, oldest first."""
+        with self.lock:
+            return list(self._recent_rects)
+
+    def lens_state_at(self, stamp: int) -> dict[str, float] | None:
+        """Return the joint positions the camera published with a frame's stamp, if seen."""
+        with self.lock:
+            return self.lens_states.get(stamp)
 
     def _on_raw(self, msg: Image | CompressedImage) -> None:
         with self.lock:

@@ -13,9 +13,10 @@ correction is on (``vignetting_correction``; its gain-limit warning joins the mo
 warnings). The input is named by ``image_transport`` and ``input_topic``; with compressed
 input, ``frames_undecodable`` counts refused payloads and ``decode_time_ms_{mean,max,last}``
 time the JPEG/PNG decoding (included in ``frame_time_ms_*``); ``frames_out_compressed`` counts
-the frames published on ``image_rect/compressed``. Level: ERROR while the last rebuild failed
-(the previous model stays in use), WARN for the model's warnings or frames that all fail, OK
-otherwise.
+the frames published on ``image_rect/compressed``; ``FrameStats.extra`` adds the entries of
+the ``lens_state`` input of a moving lens (:mod:`mechdeconv_ros.lens_follower`). Level: ERROR
+while the last rebuild failed (the previous model stays in use), WARN for the model's warnings
+or frames that all fail, OK otherwise.
 """
 
 from __future__ import annotations
@@ -53,6 +54,8 @@ class FrameStats:
         self.decode_ms_max = 0.0        # since the last diagnostics message
         self.decode_ms_sum = 0.0        # since the last diagnostics message
         self.decode_count = 0           # since the last diagnostics message
+        #: More entries for /diagnostics (the lens_state input's, lens_follower.py).
+        self.extra: dict[str, Any] = {}
 
     def add_decode_time(self, ms: float) -> None:
         """Record the decoding time of one compressed frame."""
@@ -132,6 +135,7 @@ def diagnostics_message(node: Node, live: LiveStatus, stats: FrameStats,
                         'decode_time_ms_mean': decode_mean,
                         'decode_time_ms_max': decode_max,
                         'decode_time_ms_last': stats.decode_ms_last})
+    entries.update(stats.extra)
     status = DiagnosticStatus(name=status_name(node), hardware_id='')
     warnings: list[str] = []
     summary_pending = live.active is not None and live.report is None

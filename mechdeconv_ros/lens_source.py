@@ -356,7 +356,8 @@ def source_from_values(values: Mapping[str, Any]) -> LensSource:
 
     :param values: checked parameter values.
     :return: a :class:`PrescriptionSource` when ``lens.surfaces.radius_mm`` is given, else a
-        :class:`ThickLensSource`.
+        :class:`ThickLensSource` (a lens whose groups move is picked one level up:
+        :func:`mechdeconv_ros.moving_source.source_for`).
     :raises ModelError: when the values describe no lens that focuses, or a datasheet lens
         (``lens.datasheet.*``: :class:`mechdeconv_ros.datasheet.TableSource`, which
         :func:`~mechdeconv_ros.model.build_model` picks).

@@ -66,7 +66,8 @@ import time
 from typing import Any, Callable, Iterable, Mapping
 
 from mechdeconv_ros.model import build_model, LensModel
-from mechdeconv_ros.params import coerce, MODEL_PARAMS, ParamSpec, ParamValue, SPECS
+from mechdeconv_ros.params import (
+    coerce, MAX_TABLE_ROWS, MECHANISMS, MODEL_PARAMS, ParamSpec, ParamValue, SPECS)
 from mechdeconv_ros.remap import Rectifier
 
 #: Image size used to validate parameters before the first frame, when the sensor size is not
@@ -150,11 +151,28 @@ def plain(value: Any) -> Any:
 
 
 def check_length(spec: ParamSpec, value: Any) -> None:
-    """Refuse a ``lens.surfaces.*`` array longer than :data:`MAX_SURFACES` (before reading it)."""
-    if spec.type in ('double_array', 'string_array') and hasattr(value, '__len__') \
-            and len(value) > MAX_SURFACES:
+    """Refuse an array longer than its limit (before reading it): see :func:`max_length`."""
+    if spec.type in ('double_array', 'integer_array', 'string_array') and \
+            hasattr(value, '__len__') and len(value) > max_length(spec.name):
+        if spec.name.endswith('.thickness_mm') and spec.name.startswith(_TABLES):
+            raise ValueError(f'{spec.name}: {len(value)} values, more than the '
+                             f'{max_length(spec.name)} a moving-group table may have '
+                             f'({MAX_TABLE_ROWS} rows of {MAX_TABLE_GAPS} gaps)')
         raise ValueError(f'{spec.name}: {len(value)} values, more than the {MAX_SURFACES} '
                          'surfaces a prescription may have')
+
+
+#: Prefixes of the moving-group tables (issue 19).
+_TABLES = tuple(f'lens.{m}.' for m in MECHANISMS)
+#: Most gaps one mechanism may move (its table: at most MAX_TABLE_ROWS rows of them).
+MAX_TABLE_GAPS = 16
+
+
+def max_length(name: str) -> int:
+    """Return the most values an array parameter may hold (a table: rows x gaps)."""
+    if name.startswith(_TABLES) and name.endswith('.thickness_mm'):
+        return MAX_TABLE_ROWS * MAX_TABLE_GAPS
+    return MAX_SURFACES
 
 
 def sensor_size_fixed(values: Mapping[str, Any]) -> bool:

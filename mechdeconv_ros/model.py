@@ -56,8 +56,9 @@ from mechdeconv_ros.equivalent import (
 from mechdeconv_ros.illumination import Illumination
 from mechdeconv_ros.lateral_color import LateralColor
 from mechdeconv_ros.lens_params import make_prescription
-from mechdeconv_ros.lens_source import LensSource, source_from_values
-from mechdeconv_ros.model_base import FloatArray, half_diagonal_mm, ModelError, scene_distance
+from mechdeconv_ros.lens_source import LensSource
+from mechdeconv_ros.model_base import FloatArray, half_diagonal_mm, ModelError
+from mechdeconv_ros.moving_source import source_for
 from mechdeconv_ros.params import check_values, INTERPOLATIONS, MAX_FRAME_PIXELS, ParamValue
 from mechdeconv_ros.prescription import Prescription
 from mechdeconv_ros.radial_map import (
@@ -344,7 +345,8 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
     :param width: the incoming image width, used when ``sensor.width_px`` is 0.
     :param height: the incoming image height, used when ``sensor.height_px`` is 0.
     :param source: the lens; by default the one the ``lens.*`` values describe
-        (:func:`mechdeconv_ros.lens_source.source_from_values`).
+        (:func:`mechdeconv_ros.moving_source.source_for`: the seam's
+        ``source_from_values``, or a moving prescription when a ``lens.m.joint`` is set).
     :return: the model.
     :raises ModelError: naming the parameter at fault when the values describe no camera.
     """
@@ -354,31 +356,10 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
         name = str(err).split(':', 1)[0].split('[', 1)[0].strip(" '")
         raise ModelError(name, str(err).split(':', 1)[-1].strip()) from None
     if source is None:
-        # A datasheet table, else the traced lens the lens.* values describe.
-        source = TableSource(vals) if is_table_mode(vals) else source_from_values(vals)
-    para = source.first_order()
-    f = para.efl_mm
-    if f <= 0.0:
-        raise ModelError(source.lens_parameter,
-                         f'the lens diverges (f = {f:.4g} mm): it forms no real image of the '
-                         'scene on a sensor')
-    distance = scene_distance(vals)
-    if distance <= f:
-        raise ModelError('scene.distance_mm',
-                         f'{distance:g} mm is inside the focal length {f:.4g} mm: the lens '
-                         'forms no real image of it')
-    if math.isfinite(distance) and para.front_principal_z_mm - distance >= 0.0:
-        raise ModelError('scene.distance_mm',
-                         f'{distance:g} mm from the front principal plane puts the scene inside '
-                         'the lens')
-    try:
-        sensor_z, v = source.image_plane(distance)
-    except ModelError:
-        raise       # already names its parameter (lens.image_distance_mm)
-    except ValueError as err:
-        raise ModelError('scene.distance_mm', str(err)) from None
+        # A datasheet table, a lens whose groups move, else the traced lens of the lens.* values.
+        source = TableSource(vals) if is_table_mode(vals) else source_for(vals)
     # The rules of every source (paraxial), then the ones on its surfaces (docs/design.md s. 7).
-    refusals.check_focus_distance(vals, f, para.front_principal_z_mm)
+    f, distance, sensor_z, v = refusals.check_first_order(vals, source)
     lateral_color.check_switch(vals)
     warnings = source.check_physical(distance, sensor_z)
     w, h, ow, oh = _image_size(vals, width, height)

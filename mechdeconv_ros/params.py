@@ -56,8 +56,8 @@ class ParamSpec:
     One parameter: name, type, default, unit, range and what it means.
 
     ``type`` is one of ``'double'``, ``'integer'``, ``'string'``, ``'bool'``,
-    ``'double_array'`` and ``'string_array'``. ``minimum``/``maximum`` are inclusive bounds
-    (``None``: unbounded); for arrays they bound every element.
+    ``'double_array'``, ``'integer_array'`` and ``'string_array'``. ``minimum``/``maximum``
+    are inclusive bounds (``None``: unbounded); for arrays they bound every element.
     """
 
     name: str
@@ -98,6 +98,36 @@ def _sa(name: str, description: str) -> ParamSpec:
 def _a(name: str, unit: str, description: str,
        minimum: float | None = None, maximum: float | None = None) -> ParamSpec:
     return ParamSpec(name, 'double_array', [], unit, description, minimum, maximum)
+
+
+#: The mechanisms that move lens groups (issue 19): ``lens.<m>.joint`` names the joint whose
+#: ``sensor_msgs/JointState`` position drives them. Tables: :mod:`mechdeconv_ros.lens_table`.
+MECHANISMS = ('zoom', 'focus')
+#: Most rows (joint positions) a moving-group table may have: every row, and every pair of
+#: rows of the two mechanisms, is checked for a lens that can exist when the table is set.
+MAX_TABLE_ROWS = 64
+
+
+def _moving_specs(mechanism: str) -> tuple[ParamSpec, ...]:
+    prefix = f'lens.{mechanism}'
+    return (
+        ParamSpec(f'{prefix}.joint', 'string', '', '',
+                  f'{mechanism.capitalize()} joint in lens_state; the sensor_msgs/JointState '
+                  f'joint whose position drives the {mechanism} groups (prescription mode); '
+                  f'empty = the {mechanism} does not move.'),
+        _a(f'{prefix}.positions', '1',
+           f'{mechanism.capitalize()} joint positions of the rows; those at which the moving gaps '
+           "are tabled (at least 2, strictly increasing, the joint's unit); linear in between, "
+           'clamped outside.', -1.0e9, 1.0e9),
+        ParamSpec(f'{prefix}.surfaces', 'integer_array', [], '1',
+                  f'Gap indices the {mechanism} moves; 0-based indices into '
+                  'lens.surfaces.thickness_mm of air gaps (not a glass thickness, not the last '
+                  'entry, not a gap the other mechanism moves).', 0, 255),
+        _a(f'{prefix}.thickness_mm', 'mm',
+           f'Moving gaps of each {mechanism} row; the gaps at each position, row-major '
+           '(len(positions) x len(surfaces)): row j holds them at positions[j].',
+           0.0, 1.0e4),
+    )
 
 
 #: Largest output (and input) frame the node accepts, in pixels: 8192 x 8192. The maps cost
@@ -194,6 +224,8 @@ SCHEMA: tuple[ParamSpec, ...] = (
     _i('lens.stop_surface', 0, '1',
        'Prescription mode: 0-based index of the surface whose axial point the chief ray '
        'crosses (the aperture stop).', 0, 255),
+    # --- lens: moving groups (zoom, focus) driven from lens_state (issue 19) ---
+    *(spec for mechanism in MECHANISMS for spec in _moving_specs(mechanism)),
     # --- sensor ---
     _d('sensor.pixel_size_x_um', 4.0625, 'um', 'Pixel pitch p_x along the image rows.',
        0.01, 1.0e3),
@@ -322,13 +354,18 @@ def coerce(spec: ParamSpec, value: Any) -> ParamValue:
         if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) for v in value):
             raise ValueError(f'{name}: expected a list of strings, got {value!r}')
         return [str(v) for v in value]
-    if spec.type == 'double_array':
+    if spec.type in ('double_array', 'integer_array'):
         if not isinstance(value, (list, tuple)) and not hasattr(value, 'tolist'):
             raise ValueError(f'{name}: expected a list of numbers, got {value!r}')
         items = list(value.tolist() if hasattr(value, 'tolist') else value)
         out = []
         for i, item in enumerate(items):
-            out.append(_check_number(spec, item, f'{name}[{i}]'))
+            number = _check_number(spec, item, f'{name}[{i}]')
+            if spec.type == 'integer_array':
+                if isinstance(number, float) and not number.is_integer():
+                    raise ValueError(f'{name}[{i}]: expected an integer, got {item!r}')
+                number = int(number)
+            out.append(number)
         return out
     number = _check_number(spec, value, name)
     if spec.type == 'integer':
@@ -341,7 +378,8 @@ def coerce(spec: ParamSpec, value: Any) -> ParamValue:
 def _check_number(spec: ParamSpec, value: Any, label: str) -> float:
     if not _is_real(value):
         raise ValueError(f'{label}: expected a number, got {value!r}')
-    if spec.type == 'integer' and isinstance(value, float) and not value.is_integer():
+    if spec.type in ('integer', 'integer_array') and isinstance(value, float) and \
+            not value.is_integer():
         raise ValueError(f'{label}: expected an integer, got {value!r}')
     if not math.isfinite(value):
         raise ValueError(f'{label}: must be finite, got {value!r}')
@@ -443,6 +481,10 @@ def to_params_yaml(values: Mapping[str, Any], node_name: str = '/**',
             node = node.setdefault(part, {})
         value = values[name]
         if isinstance(value, list):
-            value = [v if isinstance(v, str) else float(v) for v in value]
+            spec = SPECS.get(name)
+            if spec is not None and spec.type == 'integer_array':
+                value = [int(v) for v in value]
+            else:
+                value = [v if isinstance(v, str) else float(v) for v in value]
         node[leaf] = value
     return yaml.safe_dump({node_name: {'ros__parameters': tree}}, sort_keys=False)

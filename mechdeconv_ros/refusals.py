@@ -26,7 +26,8 @@ import math
 from typing import Any, Mapping
 
 from mechdeconv_ros import constraints
-from mechdeconv_ros.model_base import FloatArray, is_prescription_mode, ModelError, stop_param
+from mechdeconv_ros.model_base import (
+    FloatArray, is_prescription_mode, ModelError, scene_distance, stop_param)
 from mechdeconv_ros.prescription import Prescription, Surface, vertex_z
 from mechdeconv_ros.surfaces import domain_limit_mm, is_spherical
 
@@ -355,3 +356,38 @@ def check_circle_of_confusion(vals: Mapping[str, Any], f: float, width_mm: float
                          f'{width_mm:.4g} x {height_mm:.4g} mm sensor: a blur wider than the '
                          f'image defines no depth of field (it must be at most '
                          f'{diagonal:.4g} mm)')
+
+
+def check_first_order(vals: Mapping[str, Any], source: Any) -> tuple[float, float, float, float]:
+    """
+    Apply the paraxial rules of every lens source: a converging lens, a real image, a focus.
+
+    :param vals: checked parameter values.
+    :param source: the :class:`~mechdeconv_ros.lens_source.LensSource`.
+    :return: ``(f, scene distance l, z of the image plane, image distance v)``, mm.
+    :raises ModelError: naming the parameter (the lens, ``scene.distance_mm``,
+        ``scene.focus_distance_mm``).
+    """
+    para = source.first_order()
+    f = para.efl_mm
+    if f <= 0.0:
+        raise ModelError(source.lens_parameter,
+                         f'the lens diverges (f = {f:.4g} mm): it forms no real image of the '
+                         'scene on a sensor')
+    distance = scene_distance(vals)
+    if distance <= f:
+        raise ModelError('scene.distance_mm',
+                         f'{distance:g} mm is inside the focal length {f:.4g} mm: the lens '
+                         'forms no real image of it')
+    if math.isfinite(distance) and para.front_principal_z_mm - distance >= 0.0:
+        raise ModelError('scene.distance_mm',
+                         f'{distance:g} mm from the front principal plane puts the scene inside '
+                         'the lens')
+    try:
+        sensor_z, v = source.image_plane(distance)
+    except ModelError:
+        raise       # already names its parameter (lens.image_distance_mm)
+    except ValueError as err:
+        raise ModelError('scene.distance_mm', str(err)) from None
+    check_focus_distance(vals, f, para.front_principal_z_mm)
+    return f, distance, sensor_z, v

@@ -25,6 +25,12 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 
+#: The ROS type of each array type of the schema (declared statically typed).
+_ARRAY_TYPES = {'double_array': Parameter.Type.DOUBLE_ARRAY,
+                'integer_array': Parameter.Type.INTEGER_ARRAY,
+                'string_array': Parameter.Type.STRING_ARRAY}
+
+
 def descriptor_for(spec: ParamSpec) -> ParameterDescriptor:
     """
     Turn a schema entry into the ParameterDescriptor that ``ros2 param describe`` shows.
@@ -52,7 +58,7 @@ def descriptor_for(spec: ParamSpec) -> ParameterDescriptor:
     constraints = []
     if spec.choices:
         constraints.append('One of: ' + ', '.join(spec.choices) + '.')
-    if spec.type == 'double_array' and (low is not None or high is not None):
+    if spec.type in ('double_array', 'integer_array') and (low is not None or high is not None):
         constraints.append(f'Every element in [{low:g}, {high:g}] {spec.unit}.'.replace(
             ' 1.', '.'))
     descriptor.additional_constraints = ' '.join(constraints)
@@ -73,9 +79,9 @@ def declare_schema(node: Node, specs: Iterable[ParamSpec],
     """
     Declare schema parameters with their descriptors and return their checked start-up values.
 
-    Double and string arrays are declared statically typed, since rclpy cannot infer a type
-    from ``[]``
-    (it would make a BYTE_ARRAY), and set to ``[]`` when no override gave them a value.
+    Double, integer and string arrays are declared statically typed, since rclpy cannot infer
+    a type from ``[]`` (it would make a BYTE_ARRAY), and set to ``[]`` when no override gave
+    them a value.
 
     :param node: the node to declare on.
     :param specs: the specs to declare.
@@ -88,10 +94,8 @@ def declare_schema(node: Node, specs: Iterable[ParamSpec],
     errors = []
     for spec in specs:
         default = defaults.get(spec.name, spec.default)
-        if spec.type == 'double_array' and not default:
-            default = Parameter.Type.DOUBLE_ARRAY
-        elif spec.type == 'string_array' and not default:
-            default = Parameter.Type.STRING_ARRAY
+        if spec.type in _ARRAY_TYPES and not default:
+            default = _ARRAY_TYPES[spec.type]
         try:
             node.declare_parameter(spec.name, default, descriptor_for(spec))
         except InvalidParameterTypeException as err:
@@ -100,10 +104,8 @@ def declare_schema(node: Node, specs: Iterable[ParamSpec],
             errors.append(f'{spec.name}: {err}')
     if errors:
         raise ValueError('invalid start-up parameters:\n  ' + '\n  '.join(errors))
-    array_types = {'double_array': Parameter.Type.DOUBLE_ARRAY,
-                   'string_array': Parameter.Type.STRING_ARRAY}
-    unset = [Parameter(spec.name, array_types[spec.type], [])
-             for spec in specs if spec.type in array_types
+    unset = [Parameter(spec.name, _ARRAY_TYPES[spec.type], [])
+             for spec in specs if spec.type in _ARRAY_TYPES
              and node.get_parameter_or(spec.name).type_ == Parameter.Type.NOT_SET]
     if unset:
         node.set_parameters(unset)

@@ -154,6 +154,28 @@ def test_stages_quick(tmp_path):
     assert 'publish camera_info_rect' in text and 'node p50' in text
 
 
+@pytest.mark.ros
+def test_zoom_quick(tmp_path):
+    """The moving-zoom benchmark runs end to end; its accuracy part holds even when quick."""
+    from benchmarks import zoom
+    doc = zoom.run(tmp_path, quick=True)
+    assert doc['errors'] == [], doc['errors']
+    core = doc['core']
+    assert core['grid']['states'] == 33 and core['per_frame_map_ms'] > 0
+    assert core['share_within_px'] == 1.0 and core['largest_state_steps'] <= 1.0
+    node = doc['node']
+    assert node['passthrough']['fps'] > 5.0 and node['node']['fps'] > 5.0, node
+    assert node['node']['frames_checked'] > 0
+    assert node['node']['largest_state_steps'] <= 1.0, node['node']
+    assert (tmp_path / 'zoom.json').exists()
+    assert any('per-frame map' in line for line in zoom.tables(doc))
+
+
+def test_zoom_sweep_is_a_triangle():
+    from benchmarks import zoom
+    assert [zoom.sweep(t) for t in (0.0, 1.0, 2.0, 3.0, 4.0)] == [0.0, 0.5, 1.0, 0.5, 0.0]
+
+
 def test_report_imports_no_benchmark():
     """The module that writes the reports never calls back into the benchmarks it reports."""
     import ast

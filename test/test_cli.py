@@ -19,6 +19,7 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 CASE2 = str(ROOT / 'config' / 'case2.yaml')
+CONFIG = ROOT / 'config'
 
 
 def run(capsys, *argv):
@@ -151,3 +152,42 @@ def test_unusual_values_warn_once_on_stderr(tmp_path):
     assert proc.returncode == 0, proc.stderr
     lines = [line for line in proc.stderr.splitlines() if 'warning' in line]
     assert len(lines) == 1 and 'lens.stop_offset_mm: the stop is' in lines[0]
+
+
+def test_lens_state_evaluates_the_moving_lens(capsys, tmp_path):
+    from mechdeconv_ros.lens_table import values_at
+    from mechdeconv_ros.params import load_params_file
+
+    zoom = str(CONFIG / 'zoom.yaml')
+    status, out, err = run(capsys, 'info', '--params', zoom, '--lens-state', 'zoom=0.4',
+                           '--json', '--width', '320', '--height', '180')
+    assert status == 0, err
+    report = json.loads(out)
+    assert report['lens_state'] == {'zoom': 0.4}
+    values = load_params_file(CONFIG / 'zoom.yaml')
+    exact = build_model({**values_at(values, {'zoom': 0.4}), 'sensor.width_px': 320,
+                         'sensor.height_px': 180})
+    assert_allclose(report['K'], exact.K)
+    assert_allclose(report['D'], exact.D, rtol=1e-9)
+    # camera-info of the same state; clamped outside the table, with one warning.
+    status, out, err = run(capsys, 'camera-info', '--params', zoom, '--lens-state', 'zoom=7')
+    assert status == 0 and err.count('outside lens.zoom.positions') == 1
+    long_end = build_model(values_at(values, {'zoom': 1.0}))
+    assert_allclose(yaml.safe_load(out)['camera_matrix']['data'], long_end.K.ravel())
+    # correct: the image of that state.
+    image = np.random.default_rng(0).integers(0, 255, (540, 960), np.uint8)
+    cv2.imwrite(str(tmp_path / 'in.png'), image)
+    status, _, err = run(capsys, 'correct', '--params', zoom, '--lens-state', 'zoom=1',
+                         str(tmp_path / 'in.png'), str(tmp_path / 'out.png'))
+    assert status == 0, err
+    from mechdeconv_ros.remap import Rectifier
+    expected = Rectifier(long_end).correct(image)
+    assert np.array_equal(cv2.imread(str(tmp_path / 'out.png'), cv2.IMREAD_UNCHANGED), expected)
+
+
+@pytest.mark.parametrize('state, words', [
+    ('focus=1', 'focus does not move'), ('zoom', 'expected zoom=X'), ('zoom=nan', 'finite')])
+def test_lens_state_refusals(capsys, state, words):
+    status, _, err = run(capsys, 'info', '--params', str(CONFIG / 'zoom.yaml'),
+                         '--lens-state', state)
+    assert status == 2 and words in err and err.startswith('mechdeconv: error: --lens-state')

@@ -54,6 +54,7 @@ def context() -> Iterator[Context]:
 def camera_overrides(**extra: object) -> list[Parameter]:
     """Return the Case 2 lens/sensor/scene parameters plus ``extra`` (dots in names: '__')."""
     values = load_params_file(CASE2)
+    # (Empty arrays would be BYTE_ARRAY overrides: the arrays keep their declared [].)
     params = [Parameter(n, value=values[n]) for n in values
               if n.startswith(('lens.', 'sensor.', 'scene.'))
               and not isinstance(values[n], list)]     # rclpy infers no type from []

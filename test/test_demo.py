@@ -244,6 +244,7 @@ def context() -> Iterator[Context]:
 def case2_overrides(**extra: object) -> list[Parameter]:
     """Return the camera's parameters as the Case 2 params file gives them, plus ``extra``."""
     values = load_params_file(CASE2)
+    # (Empty arrays would be BYTE_ARRAY overrides: the arrays keep their declared [].)
     names = [n for n in values if n.startswith(('lens.', 'sensor.', 'scene.'))
              and not isinstance(values[n], list)]      # rclpy infers no type from []
     params = [Parameter(n, value=values[n]) for n in names]
@@ -321,4 +322,63 @@ def test_camera_takes_an_atomic_lens_change_and_refuses_impossible_ones(
         assert camera._out.pixels.shape == (240, 320, 3)
         assert (camera._out.msg.width, camera._out.msg.height) == (320, 240)
     finally:
+        camera.destroy_node()
+
+
+@pytest.mark.ros
+def test_camera_sweeps_a_moving_lens_and_renders_each_frame_at_its_state(
+        context: Context, tmp_path: Path) -> None:
+    """Issue 19: each frame comes with a lens_state of its stamp and is rendered at it."""
+    from mechdeconv_ros.moving_maps import render_grid
+    from mechdeconv_ros.params import to_params_yaml
+    from sensor_msgs.msg import JointState
+
+    values = dict(load_params_file(Path(__file__).resolve().parents[1] / 'config' /
+                                   'zoom.yaml'))
+    values['lens.zoom.positions'] = values['lens.zoom.positions'][:3]
+    values['lens.zoom.thickness_mm'] = values['lens.zoom.thickness_mm'][:9]
+    values.update({'sensor.pixel_size_x_um': 100.0, 'sensor.pixel_size_y_um': 100.0,
+                   'sensor.width_px': 240, 'sensor.height_px': 136})
+    path = tmp_path / 'zoom_small.yaml'
+    path.write_text(to_params_yaml(values, names=[
+        n for n in values if n.startswith(('lens.', 'sensor.', 'scene.'))]))
+    camera = DemoCamera(context=context, parameter_overrides=[
+        rclpy.parameter.Parameter('params_file', value=str(path)),
+        rclpy.parameter.Parameter('width', value=240),
+        rclpy.parameter.Parameter('height', value=136),
+        rclpy.parameter.Parameter('lens_sweep_s', value=0.5),
+        rclpy.parameter.Parameter('rate_hz', value=20.0)])
+    client = Node('camera_test_client', context=context)
+    frames: list[Image] = []
+    states: dict[tuple[int, int], float] = {}
+    client.create_subscription(Image, 'image_raw', frames.append, qos_profile_sensor_data)
+
+    def on_state(msg: JointState) -> None:
+        states[(msg.header.stamp.sec, msg.header.stamp.nanosec)] = msg.position[0]
+
+    client.create_subscription(JointState, 'lens_state', on_state, 10)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(camera)
+    executor.add_node(client)
+    try:
+        deadline = time.monotonic() + 20.0
+        while len(frames) < 8 and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.1)
+        assert len(frames) >= 8, 'no image_raw from the camera'
+        paired = [(f, states.get((f.header.stamp.sec, f.header.stamp.nanosec)))
+                  for f in frames]
+        paired = [(f, p) for f, p in paired if p is not None]
+        assert len(paired) >= 4
+        positions = [p for _, p in paired]
+        assert 0.0 <= min(positions) < max(positions) <= 0.125
+        grid = render_grid(camera._model, build_model, camera._chart.camera_matrix(0.0))
+        for msg, position in paired[-3:]:
+            _, full = grid.at({'zoom': position})
+            expected = cv2.remap(camera._chart.texture, full, None, cv2.INTER_LINEAR,
+                                 borderMode=cv2.BORDER_CONSTANT, borderValue=(40, 40, 40))
+            pixels, _ = image_to_array(msg)
+            assert_array_equal(pixels, expected)
+    finally:
+        executor.shutdown()
+        client.destroy_node()
         camera.destroy_node()

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from mechdeconv_ros import params
 import pytest
+import yaml
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
 
@@ -18,7 +19,7 @@ def test_schema_is_consistent():
     assert len(names) == len(set(names))
     for spec in params.SCHEMA:
         assert spec.type in ('double', 'integer', 'string', 'bool', 'double_array',
-                             'string_array')
+                             'integer_array', 'string_array')
         assert spec.description.endswith('.'), spec.name
         # Every default passes its own checks.
         assert params.coerce(spec, spec.default) == spec.default
@@ -48,6 +49,9 @@ def test_issue_contract_names_are_declared():
     # Issue 20: lateral colour (debayer is a node parameter: no model change).
     contract += ['output.lateral_color_correction', 'lens.channel_wavelengths_nm']
     assert 'debayer' in params.SPECS and 'debayer' not in params.MODEL_PARAMS
+    # Issue 19: moving groups.
+    contract += [f'lens.{m}.{k}' for m in ('zoom', 'focus')
+                 for k in ('joint', 'positions', 'surfaces', 'thickness_mm')]
     assert set(contract) <= set(params.SPECS)
     assert set(contract) == set(params.MODEL_PARAMS)
 
@@ -117,3 +121,14 @@ def test_params_file_sections(tmp_path):
     path.write_text('just: text\n')
     with pytest.raises(ValueError, match='ros__parameters'):
         params.load_params_file(path)
+
+
+def test_integer_arrays_coerce_and_write_back():
+    spec = params.SPECS['lens.zoom.surfaces']
+    assert params.coerce(spec, [4, 9.0]) == [4, 9]
+    for bad, words in (([4.5], 'expected an integer'), ([300], '300 is above the maximum'),
+                       ([-1], '-1 is below the minimum'), (['4'], 'expected a number')):
+        with pytest.raises(ValueError, match=r'lens\.zoom\.surfaces\[0\]: ' + words):
+            params.coerce(spec, bad)
+    text = params.to_params_yaml({'lens.zoom.surfaces': [4, 9]})
+    assert yaml.safe_load(text)['/**']['ros__parameters']['lens']['zoom']['surfaces'] == [4, 9]

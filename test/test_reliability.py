@@ -333,7 +333,8 @@ def param_msg(name: str, value: Any, type_: Parameter.Type | None = None) -> Par
 _ROS_TYPE = {'double': Parameter.Type.DOUBLE, 'integer': Parameter.Type.INTEGER,
              'string': Parameter.Type.STRING, 'bool': Parameter.Type.BOOL,
              'double_array': Parameter.Type.DOUBLE_ARRAY,
-             'string_array': Parameter.Type.STRING_ARRAY}
+             'string_array': Parameter.Type.STRING_ARRAY,
+             'integer_array': Parameter.Type.INTEGER_ARRAY}
 
 
 def wrong_typed(rng: np.random.Generator, name: str, declared: Parameter.Type) -> ParameterMsg:

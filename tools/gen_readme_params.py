@@ -31,6 +31,22 @@ START = '<!-- params:start -->'
 END = '<!-- params:end -->'
 #: The even asphere terms share one row of the README's table (docs/parameters.md lists each).
 ASPHERE_FOLDED = tuple(f'lens.surfaces.asphere_a{p}' for p in ASPHERE_POWERS)
+#: Groups that share one README row, by name prefix: (row label, description). The README has a
+#: size limit; docs/parameters.md lists each member with its whole description.
+FOLDED_GROUPS = {
+    'lens.tolerance.': ('lens.tolerance.*',
+                        '1-sigma manufacturing tolerances of r1, r2, t, n and d_a.'),
+    'lens.datasheet.': ('lens.datasheet.*',
+                        'Datasheet mode: field_angle_deg and image_height_mm tables (same '
+                        'length), optional relative_illumination.'),
+    'lens.zoom.': ('lens.zoom.*',
+                   'Moving zoom group: joint (in lens_state, \'\' = off), positions, the air gaps '
+                   'it moves (surfaces) and their thickness_mm at each position.'),
+    'lens.focus.': ('lens.focus.*', 'The same for a moving focus group.'),
+    'image_rect.compressed.': ('image_rect.compressed.*',
+                               'image_rect/compressed: format (jpeg, png), jpeg_quality, '
+                               'png_level; only while subscribed.'),
+}
 #: The generated page with the whole descriptions.
 PARAMETERS_PAGE = REPO / 'docs' / 'parameters.md'
 
@@ -61,6 +77,8 @@ def format_default(spec: ParamSpec) -> str:
         return '[' + ', '.join(_number(float(v)) for v in value) + ']'
     if spec.type == 'string_array':
         return '[' + ', '.join(repr(str(v)) for v in value) + ']'
+    if spec.type == 'integer_array':
+        return '[' + ', '.join(str(int(v)) for v in value) + ']'
     return str(value) or "''"
 
 
@@ -77,7 +95,7 @@ def format_range(spec: ParamSpec) -> str:
         return '-'
     low = '-inf' if spec.minimum is None else _number(spec.minimum)
     high = 'inf' if spec.maximum is None else _number(spec.maximum)
-    prefix = 'each ' if spec.type == 'double_array' else ''
+    prefix = 'each ' if spec.type in ('double_array', 'integer_array') else ''
     return f'{prefix}{low} to {high}'
 
 
@@ -129,6 +147,13 @@ def params_table(full: bool = False) -> str:
         else:
             if spec.name in ASPHERE_FOLDED[1:]:
                 continue    # one README row for the asphere terms (the README's size limit)
+            group = _group(spec.name)
+            if group is not None:
+                if spec.name != _members(group)[0]:
+                    continue
+                label, text = FOLDED_GROUPS[group]
+                rows.append(f'| `{label}` | - | - | {text} |')
+                continue
             span = format_range(spec)
             if unit not in ('-', '1') and span != '-':
                 span += f' {unit}'
@@ -141,6 +166,31 @@ def params_table(full: bool = False) -> str:
             cells = (name, f'`{format_default(spec)}`', span, text)
         rows.append('| ' + ' | '.join(_cell(c) for c in cells) + ' |')
     return '\n'.join(rows)
+
+
+def _group(name: str) -> str | None:
+    """Return the folded group (a key of :data:`FOLDED_GROUPS`) of a name, or None."""
+    return next((prefix for prefix in FOLDED_GROUPS if name.startswith(prefix)), None)
+
+
+def _members(group: str) -> list[str]:
+    """Return the schema names of a folded group, in schema order."""
+    return [spec.name for spec in SCHEMA if spec.name.startswith(group)]
+
+
+def readme_row_names() -> list[str]:
+    """
+    Return the name of each row of the README's table, in order.
+
+    :return: schema names, with one label per folded group and one row for the asphere terms.
+    """
+    names = []
+    for spec in SCHEMA:
+        group = _group(spec.name)
+        if spec.name in ASPHERE_FOLDED[1:] or (group and spec.name != _members(group)[0]):
+            continue
+        names.append(FOLDED_GROUPS[group][0] if group else spec.name)
+    return names
 
 
 def parameters_page() -> str:
