@@ -40,8 +40,8 @@ FOLDED_GROUPS = {
                         'Datasheet mode: field_angle_deg and image_height_mm tables (same '
                         'length), optional relative_illumination.'),
     'lens.zoom.': ('lens.zoom.*',
-                   'Moving zoom group: joint (in lens_state; empty = off), positions, the air gaps '
-                   'it moves (surfaces) and their thickness_mm at each position.'),
+                   'Moving zoom group: joint (in lens_state; empty = off), positions, the air '
+                   'gaps it moves (surfaces) and their thickness_mm at each position.'),
     'lens.focus.': ('lens.focus.*', 'The same for a moving focus group.'),
     'image_rect.compressed.': ('image_rect.compressed.*',
                                'image_rect/compressed: format (jpeg, png), jpeg_quality, '
