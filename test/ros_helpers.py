@@ -21,12 +21,13 @@ Helpers for the tests that run real ROS 2 processes (no mocks).
 from __future__ import annotations
 
 import array
+import contextlib
 import itertools
 from pathlib import Path
 import signal
 import sys
 import time
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 from mechdeconv_ros import graph_env
 from mechdeconv_ros.graph_env import Child
@@ -106,6 +107,31 @@ class NodeProcess(Child):
         :return: the exit code (negative: killed by a signal).
         """
         return super().stop(sig, timeout, **kwargs)
+
+
+@contextlib.contextmanager
+def running_node(argv: Sequence[str], domain: int, log_dir: Path,
+                 answer_timeout: float = 15.0) -> Iterator[tuple[NodeProcess, RosClient]]:
+    """
+    Run a node until the block ends, then stop it by SIGINT and assert a clean exit.
+
+    :param argv: the node's command (:func:`node_command`).
+    :param domain: its ``ROS_DOMAIN_ID``.
+    :param log_dir: where its logs go.
+    :param answer_timeout: seconds the node may take to answer its first service call.
+    :return: the process and a client already talking to it.
+    """
+    with NodeProcess(argv, ros_env(domain), log_dir) as proc:
+        client = RosClient(domain)
+        try:
+            client.wait_until_answering(timeout=answer_timeout)
+            yield proc, client
+        finally:
+            client.close()
+            code = proc.stop(signal.SIGINT)
+            log = proc.output()
+        assert code == 0, f'correct_node exited with {code} after SIGINT:\n{log[-3000:]}'
+        assert 'Traceback' not in log, log[-3000:]
 
 
 def node_command(params_file: Path | None, *overrides: str,

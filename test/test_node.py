@@ -36,8 +36,8 @@ import pytest
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from ros_helpers import (
-    BEST_EFFORT, FASTDDS_PROFILE, make_image, next_domain_id, node_command, NodeProcess,
-    REPO, ros_env, RosClient, stamp_of)
+    BEST_EFFORT, FASTDDS_PROFILE, make_image, next_domain_id, node_command, NodeProcess, REPO,
+    ros_env, RosClient, running_node, stamp_of)
 from sensor_msgs.msg import CameraInfo, Image
 
 pytestmark = pytest.mark.ros
@@ -169,17 +169,8 @@ def harness(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Harness]:
     domain = next_domain_id()
     values = load_params_file(params)
     values.update({'sensor.width_px': 0, 'sensor.height_px': 0})
-    with NodeProcess(node_command(params, *FOLLOW_IMAGES), ros_env(domain), tmp) as proc:
-        client = RosClient(domain)
-        try:
-            client.wait_until_answering()
-            yield Harness(proc, client, values)
-        finally:
-            client.close()
-            code = proc.stop(signal.SIGINT)
-            log = proc.output()
-        assert code == 0, f'correct_node exited with {code} after SIGINT:\n{log[-3000:]}'
-        assert 'Traceback' not in log, log[-3000:]
+    with running_node(node_command(params, *FOLLOW_IMAGES), domain, tmp) as (proc, client):
+        yield Harness(proc, client, values)
 
 
 @pytest.fixture

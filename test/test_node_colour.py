@@ -15,7 +15,6 @@ own process, as in test_node.py, and must exit 0 on SIGINT.
 
 from __future__ import annotations
 
-import signal
 import time
 from typing import Any, Iterator
 
@@ -27,7 +26,7 @@ import numpy as np
 import numpy.testing as npt
 import pytest
 from rclpy.parameter import Parameter
-from ros_helpers import make_image, next_domain_id, node_command, NodeProcess, ros_env, RosClient
+from ros_helpers import make_image, next_domain_id, node_command, running_node
 from test_node import (
     assert_camera_infos, case2_params, expected_model, FOLLOW_IMAGES, Harness, Outputs)
 
@@ -52,17 +51,8 @@ def harness(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Harness]:
     domain = next_domain_id()
     values = load_params_file(params)
     values.update({'sensor.width_px': 0, 'sensor.height_px': 0})
-    with NodeProcess(node_command(params, *FOLLOW_IMAGES), ros_env(domain), tmp) as proc:
-        client = RosClient(domain)
-        try:
-            client.wait_until_answering()
-            yield Harness(proc, client, values)
-        finally:
-            client.close()
-            code = proc.stop(signal.SIGINT)
-            log = proc.output()
-        assert code == 0, f'correct_node exited with {code} after SIGINT:\n{log[-3000:]}'
-        assert 'Traceback' not in log, log[-3000:]
+    with running_node(node_command(params, *FOLLOW_IMAGES), domain, tmp) as (proc, client):
+        yield Harness(proc, client, values)
 
 
 @pytest.fixture

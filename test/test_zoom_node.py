@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-import signal
 import time
 from typing import Any, Iterator
 
@@ -29,8 +28,8 @@ import numpy as np
 import numpy.testing as npt
 import pytest
 from ros_helpers import (
-    BEST_EFFORT, make_image, next_domain_id, node_command, NodeProcess, REPO, ros_env,
-    RosClient, stamp_of)
+    BEST_EFFORT, make_image, next_domain_id, node_command, REPO, RosClient, running_node,
+    stamp_of)
 from sensor_msgs.msg import CameraInfo, Image, JointState
 
 pytestmark = pytest.mark.ros
@@ -92,17 +91,8 @@ def running(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Client, 
     tmp = tmp_path_factory.mktemp('zoom_node')
     path, values = small_zoom(tmp)
     domain = next_domain_id()
-    with NodeProcess(node_command(path), ros_env(domain), tmp) as proc:
-        client = RosClient(domain)
-        try:
-            client.wait_until_answering(timeout=60.0)
-            yield Client(client), values, proc
-        finally:
-            client.close()
-            code = proc.stop(signal.SIGINT)
-            log = proc.output()
-        assert code == 0, f'correct_node exited with {code} after SIGINT:\n{log[-3000:]}'
-        assert 'Traceback' not in log, log[-3000:]
+    with running_node(node_command(path), domain, tmp, answer_timeout=60.0) as (proc, client):
+        yield Client(client), values, proc
 
 
 def _exact(values: dict, p: float):
