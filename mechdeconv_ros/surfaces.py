@@ -274,7 +274,8 @@ def _newton(surface: SurfaceShape, x: ArrayLike, y: np.ndarray, z: np.ndarray, k
         s -= step
         # Rays that converged stay at their root (their steps are ~0); NaN rays stay NaN.
         np.abs(step, out=step)
-        if not np.nanmax(step, initial=0.0) > NEWTON_FINAL_STEP_MM:
+        # Any step above the tolerance (NaN compares False: as np.nanmax, without its copy).
+        if not np.greater(step, NEWTON_FINAL_STEP_MM).any():
             converged = True
             break
     if not converged:
