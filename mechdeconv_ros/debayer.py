@@ -100,16 +100,26 @@ def stripe_count(height: int, threads: int | None = None) -> int:
 
 
 def _demosaic_striped(mosaic: npt.NDArray[Any], code: int, dst: npt.NDArray[Any],
-                      stripes: int) -> npt.NDArray[Any]:
-    """Demosaic ``stripes`` horizontal stripes with overlap on the pool, into ``dst``."""
-    height = mosaic.shape[0]
+                      stripes: int, scratch: dict[Any, npt.NDArray[Any]] | None = None
+                      ) -> npt.NDArray[Any]:
+    """
+    Demosaic ``stripes`` horizontal stripes with overlap on the pool, into ``dst``.
+
+    ``scratch`` keeps each stripe's output buffer (with its overlap rows) between calls.
+    """
+    height, width = mosaic.shape
     edges = [height * i // stripes // 2 * 2 for i in range(stripes + 1)]
+    scratch = {} if scratch is None else scratch
 
     def one(index: int) -> None:
         top, bottom = edges[index], edges[index + 1]
         start = max(top - STRIPE_OVERLAP, 0)
         stop = min(bottom + STRIPE_OVERLAP, height)
-        part = cv2.cvtColor(mosaic[start:stop], code)
+        shape = (stop - start, width, 3)
+        part = scratch.get((index, stripes))
+        if part is None or part.shape != shape or part.dtype != mosaic.dtype:
+            part = scratch[(index, stripes)] = np.empty(shape, mosaic.dtype)
+        cv2.cvtColor(mosaic[start:stop], code, dst=part)
         dst[top:bottom] = part[top - start:bottom - start]
 
     for future in [_stripe_pool().submit(one, i) for i in range(stripes)]:
@@ -145,8 +155,8 @@ def method_for(method: str, dtype: Any) -> str:
 
 
 def demosaic(mosaic: npt.NDArray[Any], pattern: str, method: str = DEFAULT_DEBAYER,
-             dst: npt.NDArray[Any] | None = None,
-             threads: int | None = None) -> npt.NDArray[Any]:
+             dst: npt.NDArray[Any] | None = None, threads: int | None = None,
+             scratch: dict[Any, npt.NDArray[Any]] | None = None) -> npt.NDArray[Any]:
     """
     Demosaic one Bayer frame into RGB.
 
@@ -156,6 +166,8 @@ def demosaic(mosaic: npt.NDArray[Any], pattern: str, method: str = DEFAULT_DEBAY
     :param dst: optional ``(H, W, 3)`` output of the mosaic's dtype, written in place.
     :param threads: threads for ``vng`` stripes (default ``cv2.getNumThreads()``; 1 = the
         whole frame in one call); the result is the same for any count.
+    :param scratch: optional dict in which the ``vng`` stripes keep their buffers between
+        calls (one caller at a time per dict).
     :return: ``(H, W, 3)`` RGB of the mosaic's dtype (``dst`` when given).
     :raises ValueError: for an unknown pattern or method, a mosaic that is not 2-D uint8 /
         uint16, or an odd size.
@@ -177,7 +189,7 @@ def demosaic(mosaic: npt.NDArray[Any], pattern: str, method: str = DEFAULT_DEBAY
         return cv2.cvtColor(mosaic, code, dst=dst)
     if dst is None:
         dst = np.empty((height, width, 3), mosaic.dtype)
-    return _demosaic_striped(mosaic, code, dst, stripes)
+    return _demosaic_striped(mosaic, code, dst, stripes, scratch)
 
 
 class Demosaicer:
@@ -191,6 +203,7 @@ class Demosaicer:
     def __init__(self) -> None:
         """Create it with no buffer."""
         self._buffer: npt.NDArray[Any] | None = None
+        self._scratch: dict[Any, npt.NDArray[Any]] = {}
         self._noted = False
 
     def demosaic(self, mosaic: npt.NDArray[Any], pattern: str,
@@ -209,7 +222,7 @@ class Demosaicer:
         buffer = self._buffer
         if buffer is None or buffer.shape != shape or buffer.dtype != mosaic.dtype:
             buffer = self._buffer = np.empty(shape, mosaic.dtype)
-        rgb = demosaic(mosaic, pattern, method, dst=buffer)
+        rgb = demosaic(mosaic, pattern, method, dst=buffer, scratch=self._scratch)
         note = None
         if not self._noted and method_for(method, mosaic.dtype) != method:
             self._noted = True

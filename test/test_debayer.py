@@ -72,6 +72,20 @@ def test_vng_in_stripes_is_bit_identical_to_the_whole_frame_call(pattern: str) -
             npt.assert_array_equal(out, whole, err_msg=f'{height} rows, {threads} stripes')
     npt.assert_array_equal(demosaic(mosaic, pattern, 'vng', threads=4), whole)
     assert stripe_count(100, 4) == 1, 'a small frame is demosaiced whole'
+    # The Demosaicer's stripes (OpenCV's thread count) keep their buffers between frames.
+    previous = cv2.getNumThreads()
+    cv2.setNumThreads(3)
+    try:
+        demosaicer = Demosaicer()
+        first, _ = demosaicer.demosaic(mosaic, pattern, 'vng')
+        npt.assert_array_equal(first, whole)
+        kept = dict(demosaicer._scratch)
+        other = rng.integers(0, 256, mosaic.shape, dtype=np.uint8)
+        again, _ = demosaicer.demosaic(other, pattern, 'vng')
+        npt.assert_array_equal(again, cv2.cvtColor(other, code))
+        assert len(kept) == 3 and all(demosaicer._scratch[k] is v for k, v in kept.items())
+    finally:
+        cv2.setNumThreads(previous)
 
 
 @pytest.mark.parametrize('pattern', BAYER_PATTERNS)
