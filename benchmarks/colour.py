@@ -14,12 +14,16 @@ frame.
 * **Bayer**, same sizes, ``bayer_rggb8``: demosaicing (:class:`mechdeconv_ros.debayer.
   Demosaicer`, each ``debayer`` method) plus the correction, against the rgb8 correction of
   the same frame size. Target: demosaic + correction / correction <= 1.5.
+* The same two (rgb8 correction; ``vng`` + correction) again at the node's default thread
+  count (``remap_threads`` 0: OpenCV's default, every core), where the remap runs on every core
+  and VNG in as many stripes (:mod:`mechdeconv_ros.debayer`); like with like, both ratios.
 * **Rebuild** at 1920x1080: ``build_model`` + ``Rectifier`` without and with lateral colour
   (three channel traces and three maps), and the traces alone (``trace_ms``).
 """
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 import sys
 from typing import Any, Mapping
@@ -53,6 +57,7 @@ def frames(rounds: int, reps: int, quiet: float, sizes=FRAME_SIZES) -> dict[str,
     values = glass_values()
     out: dict[str, Any] = {}
     rng = np.random.default_rng(0)
+    default = os.cpu_count() or 1          # what cv2.setNumThreads(-1) gives, as the node
     for width, height in sizes:
         model = build_model(dict(values, **{'output.lateral_color_correction': True}),
                             width, height)
@@ -77,6 +82,8 @@ def frames(rounds: int, reps: int, quiet: float, sizes=FRAME_SIZES) -> dict[str,
             Variant('lateral', lambda: lateral.correct(src, dst, colours=(0, 1, 2)), 1),
             *(Variant(f'bayer {m}', bayer(m, False), 1) for m in DEBAYER_METHODS),
             Variant('bayer bilinear + lateral', bayer('bilinear', True), 1),
+            Variant('single, default threads', lambda: single.correct(src, dst), default),
+            Variant('bayer vng, default threads', bayer('vng', False), default),
         ]
         timings, others = interleave(variants, rounds, reps, quiet)
         result: dict[str, Any] = {name: t.summary() for name, t in timings.items()}
@@ -87,13 +94,18 @@ def frames(rounds: int, reps: int, quiet: float, sizes=FRAME_SIZES) -> dict[str,
                                      for m in DEBAYER_METHODS}
         result['bayer_target_met'] = {m: bool(r <= BAYER_RATIO_TARGET)
                                       for m, r in result['bayer_over_rgb8'].items()}
+        result['default_threads'] = {
+            'threads': default,
+            'bayer_vng_over_rgb8': (result['bayer vng, default threads']['median_ms']
+                                    / result['single, default threads']['median_ms'])}
         result['others_cores'] = others
         key = f'{width}x{height}'
         out[key] = result
         bayer_text = ', '.join(f'bayer {m} x{r:.2f}' for m, r in result['bayer_over_rgb8'].items())
         lateral = result['lateral']['median_ms']
         log(f'colour: {key}: single {base:.3g} ms, lateral {lateral:.3g} ms '
-            f"(x{result['lateral_over_single']:.2f}), {bayer_text}")
+            f"(x{result['lateral_over_single']:.2f}), {bayer_text}; {default} threads: "
+            f"bayer vng x{result['default_threads']['bayer_vng_over_rgb8']:.2f}")
     return out
 
 
@@ -153,6 +165,16 @@ def tables(doc: Mapping[str, Any]) -> list[str]:
     lines += markdown_table(('frame', 'one map', 'map per channel', 'ratio (target 1.3)',
                              *(f'Bayer {m} / rgb8 (target 1.5)' for m in DEBAYER_METHODS)),
                             rows)
+    lines += ['', "At the node's default threads (remap on every core, VNG in stripes):", '']
+    rows = []
+    for key, r in doc['per_frame'].items():
+        d = r.get('default_threads')
+        if d:
+            rows.append((key, d['threads'], f"{r['single, default threads']['median_ms']:.3g}",
+                         f"{r['bayer vng, default threads']['median_ms']:.3g}",
+                         f"{d['bayer_vng_over_rgb8']:.2f}"))
+    lines += markdown_table(('frame', 'threads', 'rgb8 correction', 'Bayer vng + correction',
+                             'ratio (target 1.5)'), rows)
     rebuild = doc['rebuild']
     lines += ['', f"Rebuild at {rebuild['size']} (median ms, 1 thread):", '']
     lines += markdown_table(

@@ -281,7 +281,8 @@ SCHEMA: tuple[ParamSpec, ...] = (
     _i('remap_threads', 0, '1',
        'Threads OpenCV may use for the remap (cv2.setNumThreads); 0 = OpenCV default, all '
        'cores, as image_proc. 1 leaves the other cores to the camera driver and the DDS '
-       'transport; on 2 cores it sustains about 2/3 of the frame rate.', 0, 64),
+       'transport; on 2 cores it sustains about 2/3 of the frame rate. Bayer input with '
+       'debayer vng is demosaiced in as many stripes, one per thread.', 0, 64),
     ParamSpec('image_transport', 'string', 'raw', '',
               'Input transport, read at start-up as image_proc does: raw subscribes image_raw '
               '(sensor_msgs/Image); compressed subscribes the resolved image_raw + '

@@ -131,30 +131,36 @@ def sag_slope(surface: SurfaceShape, r2: ArrayLike) -> np.ndarray:
 
 
 def _sag_and_slope(surface: SurfaceShape, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    with np.errstate(**_ERRSTATE):
+        return _sag_and_slope_quiet(surface, u)
+
+
+def _sag_and_slope_quiet(surface: SurfaceShape,
+                         u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Return the sag and dz/du; the caller holds ``np.errstate(**_ERRSTATE)``."""
     c = surface.curvature_per_mm
     q = 1.0 + surface.conic
-    with np.errstate(**_ERRSTATE):
-        # NaN outside the domain; an array even for 0-d input (np.divide writes into it).
-        root = np.asarray(np.sqrt(1.0 - (q * c * c) * u))
-        z = c * u / (1.0 + root)
-        dz = np.divide(0.5 * c, root, out=root)
-        poly = _poly(surface)
-        if poly:
-            # Horner in u: P = sum_j a_j u^j and Q = sum_j (j + 2) a_j u^j, so that the
-            # asphere terms are P u^2 and their derivative Q u (in place: no temporaries).
-            last = len(poly) - 1
-            value = np.full_like(u, poly[last])
-            slope = np.full_like(u, (last + 2) * poly[last])
-            for j in range(last - 1, -1, -1):
-                value *= u
-                value += poly[j]
-                slope *= u
-                slope += (j + 2) * poly[j]
+    # NaN outside the domain; an array even for 0-d input (np.divide writes into it).
+    root = np.asarray(np.sqrt(1.0 - (q * c * c) * u))
+    z = c * u / (1.0 + root)
+    dz = np.divide(0.5 * c, root, out=root)
+    poly = _poly(surface)
+    if poly:
+        # Horner in u: P = sum_j a_j u^j and Q = sum_j (j + 2) a_j u^j, so that the
+        # asphere terms are P u^2 and their derivative Q u (in place: no temporaries).
+        last = len(poly) - 1
+        value = np.full(u.shape, poly[last])
+        slope = np.full(u.shape, (last + 2) * poly[last])
+        for j in range(last - 1, -1, -1):
             value *= u
-            value *= u
-            z += value
+            value += poly[j]
             slope *= u
-            dz += slope
+            slope += (j + 2) * poly[j]
+        value *= u
+        value *= u
+        z += value
+        slope *= u
+        dz += slope
     return z, dz
 
 
@@ -265,7 +271,7 @@ def _newton(surface: SurfaceShape, x: ArrayLike, y: np.ndarray, z: np.ndarray, k
             u = px * px + py * py
             du = px * kx + py * ky
         du *= 2.0
-        height, slope = _sag_and_slope(surface, u)
+        height, slope = _sag_and_slope_quiet(surface, u)     # inside intersect's errstate
         du *= slope
         np.subtract(kz, du, out=du)
         step = z + s * kz
@@ -274,7 +280,8 @@ def _newton(surface: SurfaceShape, x: ArrayLike, y: np.ndarray, z: np.ndarray, k
         s -= step
         # Rays that converged stay at their root (their steps are ~0); NaN rays stay NaN.
         np.abs(step, out=step)
-        if not np.nanmax(step, initial=0.0) > NEWTON_FINAL_STEP_MM:
+        # Any step above the tolerance (NaN compares False: as np.nanmax, without its copy).
+        if not np.greater(step, NEWTON_FINAL_STEP_MM).any():
             converged = True
             break
     if not converged:

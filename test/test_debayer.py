@@ -15,7 +15,7 @@ from pathlib import Path
 
 import cv2
 from mechdeconv_ros.cli import main
-from mechdeconv_ros.debayer import demosaic, Demosaicer, method_for
+from mechdeconv_ros.debayer import _CODES, demosaic, Demosaicer, method_for, stripe_count
 from mechdeconv_ros.model import build_model
 from mechdeconv_ros.params import BAYER_PATTERNS, check_values, DEBAYER_METHODS, SPECS
 from mechdeconv_ros.remap import Rectifier
@@ -55,6 +55,37 @@ def test_each_tile_gives_back_the_rgb_image(pattern: str, method: str) -> None:
     npt.assert_allclose(out[inner], rgb[inner], atol=6)
     swapped = demosaic(mosaic_of(rgb[..., ::-1], pattern), pattern, method)
     assert np.abs(swapped[inner].astype(int) - rgb[inner]).max() > 20
+
+
+@pytest.mark.parametrize('pattern', BAYER_PATTERNS)
+def test_vng_in_stripes_is_bit_identical_to_the_whole_frame_call(pattern: str) -> None:
+    rng = np.random.default_rng(7)
+    code = _CODES[(pattern, 'vng')]
+    # Noise (every neighbour matters), rows that do not split evenly, odd stripe heights.
+    for height, width in ((1080, 96), (642, 34), (258, 40)):
+        mosaic = rng.integers(0, 256, (height, width), dtype=np.uint8)
+        whole = cv2.cvtColor(mosaic, code)
+        for threads in (2, 3, 4, 8):
+            assert stripe_count(height, threads) > 1
+            out = np.empty_like(whole)
+            assert demosaic(mosaic, pattern, 'vng', dst=out, threads=threads) is out
+            npt.assert_array_equal(out, whole, err_msg=f'{height} rows, {threads} stripes')
+    npt.assert_array_equal(demosaic(mosaic, pattern, 'vng', threads=4), whole)
+    assert stripe_count(100, 4) == 1, 'a small frame is demosaiced whole'
+    # The Demosaicer's stripes (OpenCV's thread count) keep their buffers between frames.
+    previous = cv2.getNumThreads()
+    cv2.setNumThreads(3)
+    try:
+        demosaicer = Demosaicer()
+        first, _ = demosaicer.demosaic(mosaic, pattern, 'vng')
+        npt.assert_array_equal(first, whole)
+        kept = dict(demosaicer._scratch)
+        other = rng.integers(0, 256, mosaic.shape, dtype=np.uint8)
+        again, _ = demosaicer.demosaic(other, pattern, 'vng')
+        npt.assert_array_equal(again, cv2.cvtColor(other, code))
+        assert len(kept) == 3 and all(demosaicer._scratch[k] is v for k, v in kept.items())
+    finally:
+        cv2.setNumThreads(previous)
 
 
 @pytest.mark.parametrize('pattern', BAYER_PATTERNS)
