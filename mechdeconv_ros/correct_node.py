@@ -223,7 +223,7 @@ class CorrectNode(Node):
                     f'{traces.max_rb_separation_px:.3g} px')
         if rectifier.gain is not None:
             rectifier.gain_for(self._channels)
-            # (The allocator warm-up builds a model's maps again: warn once per model.)
+            # (A new frame size builds a model's maps again: warn once per model.)
             if rectifier.vignetting_warning and model is not self._warned_model:
                 self._warned_model = model
                 self.get_logger().warning(rectifier.vignetting_warning)
@@ -233,8 +233,8 @@ class CorrectNode(Node):
         """
         Build the grid of a moving lens (issue 19; seconds: one model per grid state).
 
-        Same threads as ``_build_maps``; the allocator warm-up asks again for the model in
-        use, which gets the grid it has (``_moving_cache``: one reference, swapped whole).
+        Same threads as ``_build_maps``; a second request for the model in use gets the grid
+        it has (``_moving_cache``: one reference, swapped whole).
         """
         cached = self._moving_cache
         if cached is not None and cached.model is model:

@@ -211,6 +211,7 @@ class LiveModel:
     def __init__(self, values: Mapping[str, ParamValue], *,
                  build_model: ModelBuilder = build_model,
                  build_maps: MapsBuilder = Rectifier,
+                 warm_maps: MapsBuilder | None = None,
                  extras: Callable[[Any], Any] | None = None,
                  log: LogFunction = _no_log) -> None:
         """
@@ -219,12 +220,16 @@ class LiveModel:
         :param values: every schema parameter's value (already coerced).
         :param build_model: builds a LensModel (injectable: the tests block it).
         :param build_maps: builds the remap tables of a model (injectable likewise).
+        :param warm_maps: builds the throw-away tables of the allocator warm-up: a plain
+            :class:`~mechdeconv_ros.remap.Rectifier` unless injected (the node's
+            ``build_maps`` also logs and caches, which a warm-up must not repeat).
         :param extras: makes the per-model extras the frame path publishes (e.g. CameraInfo).
         :param log: receives log lines as ``(level, message)``.
         :raises ValueError: when the start-up values describe no model (the model's reason).
         """
         self._build_model = build_model
         self._build_maps = build_maps
+        self._warm_maps = Rectifier if warm_maps is None else warm_maps
         self._extras = extras
         self._log = log
         self._lock = threading.Condition()
@@ -560,7 +565,7 @@ class LiveModel:
             return
         self._warmed_size = _image_size(active.model)
         try:
-            self._build_maps(active.model)
+            self._warm_maps(active.model)
         except Exception as err:    # noqa: B902 - an optimisation must never stop the thread
             self._say('warning', f'allocator warm-up failed: {err!r}')
 

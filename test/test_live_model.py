@@ -19,6 +19,7 @@ from typing import Any, Iterator, Mapping
 from mechdeconv_ros.live_model import (
     FrameDropped, LiveModel, MAX_SURFACES, NOMINAL_SIZE, THREAD_NAME)
 from mechdeconv_ros.params import defaults
+from mechdeconv_ros.remap import Rectifier
 import pytest
 
 OFFSET = 'lens.stop_offset_mm'
@@ -109,6 +110,7 @@ def make_live(gate: Gate, **changes: Any) -> LiveModel:
     """Return a started LiveModel on ``gate`` (the tests stop it)."""
     logs: list[tuple[str, str]] = []
     live = LiveModel(values_with(**changes), build_model=gate.build_model, build_maps=gate,
+                     warm_maps=gate,
                      extras=lambda model: ('info', model.offset), log=lambda *a: logs.append(a))
     live.logs = logs            # type: ignore[attr-defined]
     live.start()
@@ -160,9 +162,9 @@ def test_startup_validates_and_a_fixed_sensor_installs_at_once() -> None:
     gate = Gate(hold=False)
     with pytest.raises(ValueError, match=OFFSET):
         LiveModel(values_with(lens__stop_offset_mm=BAD_OFFSET), build_model=gate.build_model,
-                  build_maps=gate)
+                  build_maps=gate, warm_maps=gate)
     live = LiveModel(values_with(sensor__width_px=32, sensor__height_px=24),
-                     build_model=gate.build_model, build_maps=gate)
+                     build_model=gate.build_model, build_maps=gate, warm_maps=gate)
     status = live.status()
     assert status.active is not None and status.revision == 1
     assert status.input_size == (32, 24)
@@ -391,7 +393,8 @@ def test_a_failing_logger_does_not_stop_the_rebuild_thread(gate: Gate) -> None:
             raise ValueError('Logger severity cannot be changed between calls.')
 
     gate.hold = False
-    live = LiveModel(values_with(), build_model=gate.build_model, build_maps=gate, log=log)
+    live = LiveModel(values_with(), build_model=gate.build_model, build_maps=gate,
+                     warm_maps=gate, log=log)
     live.start()
     try:
         first_frame(live, gate)
@@ -423,7 +426,8 @@ def test_a_set_is_built_while_a_summary_is_being_computed(gate: Gate) -> None:
     SlowSummaryModel.release.clear()
     SlowSummaryModel.started.clear()
     live = LiveModel(values_with(), build_model=lambda v, w, h: SlowSummaryModel(v, w, h),
-                     build_maps=gate, extras=lambda model: None, log=lambda *a: None)
+                     build_maps=gate, warm_maps=gate, extras=lambda model: None,
+                     log=lambda *a: None)
     live.start()
     try:
         live.model_for_frame(640, 480)
@@ -454,3 +458,23 @@ def test_stop_ends_the_thread_even_during_a_build(gate: Gate) -> None:
     assert not stopper.is_alive()
     assert not any(t.is_alive() for t in live._threads), 'stop must end both threads'
     assert live.status().active.model.offset == 0.3     # the build under way was installed
+
+
+def test_the_allocator_warm_up_builds_a_plain_rectifier_not_the_nodes_maps() -> None:
+    """The node's maps builder logs and caches: the warm-up must not call it a second time."""
+    calls: list[Any] = []
+
+    def node_maps(model: Any) -> Rectifier:
+        calls.append(model)
+        return Rectifier(model)
+
+    live = LiveModel(values_with(), build_maps=node_maps)
+    live.start()
+    try:
+        active = live.model_for_frame(64, 48)
+        assert live.wait_idle(WAIT_S)
+        assert isinstance(active.rectifier, Rectifier)
+        assert calls == [active.model], 'one maps build by the node builder, for the frame'
+        assert live._warmed_size == (64, 48), 'the warm-up ran, with its own plain Rectifier'
+    finally:
+        live.stop()
