@@ -12,8 +12,8 @@ Waits (up to ``--wait-load`` seconds, default 600) for the 1-minute load average
 below 0.5, so the timings are taken on a quiet machine; then runs :mod:`benchmarks.accuracy`,
 :mod:`benchmarks.speed`, :mod:`benchmarks.node_latency`, :mod:`benchmarks.stages`,
 :mod:`benchmarks.wide`, :mod:`benchmarks.vignetting`, :mod:`benchmarks.colour`,
-:mod:`benchmarks.compressed_input` and :mod:`benchmarks.zoom` (a moving zoom lens), each
-writing its
+:mod:`benchmarks.compressed_input`, :mod:`benchmarks.zoom` (a moving zoom lens) and
+:mod:`benchmarks.lens_import` (imported lens files against optiland), each writing its
 ``results/<name>.json`` and figures, and finally prints the markdown tables (made by
 :mod:`benchmarks.report`) and writes them to ``results/README_tables.md`` and to
 ``docs/benchmarks.md`` (a generated file: the machine line at the top, figure links relative
@@ -33,8 +33,8 @@ import time
 from typing import Any, Callable
 
 from benchmarks import (
-    accuracy, colour, compressed_input, node_latency, report, speed, stages, vignetting,
-    wide, zoom)
+    accuracy, colour, compressed_input, lens_import, node_latency, report, speed, stages,
+    vignetting, wide, zoom)
 from benchmarks.common import log, RESULTS, wait_for_low_load
 from benchmarks.report import machine_info, machine_line, write_json
 
@@ -50,6 +50,7 @@ BENCHMARKS: dict[str, tuple[Callable[..., Any], Callable[[Any], list[str]]]] = {
                    lambda doc: ['### Compressed input (JPEG q90 at 30 Hz)', '',
                                 compressed_input.table(doc), '']),
     'zoom': (zoom.run, zoom.tables),
+    'lens_import': (lens_import.run, lens_import.tables),
 }
 #: The generated page of full tables.
 DOCS_PAGE = Path(__file__).resolve().parents[1] / 'docs' / 'benchmarks.md'

@@ -86,6 +86,18 @@ def test_wide_quick(tmp_path):
     assert any('aspheric' in line for line in wide.tables(doc))
 
 
+def test_lens_import_quick(tmp_path):
+    from benchmarks import lens_import
+    doc = lens_import.run(tmp_path, quick=True)
+    assert len(doc['lenses']) >= 3
+    for key, row in doc['lenses'].items():
+        # The reader and the tracer agree with optiland whatever the glass data says.
+        assert row['geometry_px'] <= 0.01 and row['geometry_efl_rel'] <= 1e-6, key
+        assert 'glass_px' in row or row['refused'], key
+    assert (tmp_path / 'lens_import.json').exists()
+    assert any('edmund_55278' in line for line in lens_import.tables(doc))
+
+
 @pytest.mark.ros
 def test_node_latency_quick(tmp_path):
     doc = node_latency.run(tmp_path, quick=True)
