@@ -16,19 +16,17 @@ of the output and mirrored; the quadrant's radius look-up runs through ``cv2.rem
 two-row table (both rows equal), several times faster than ``np.interp`` per pixel. Pixels
 outside the valid field are sent far outside the source so ``BORDER_CONSTANT`` paints them 0.
 
-Which map form remaps fastest depends on the CPU: two CV_32FC1 arrays (``cv2.remap`` converts
-them to fixed point block by block in cache) were fastest on an Intel Xeon (1080p mono8 3.45
-against 4.07 ms), converted CV_16SC2 + CV_16UC1 maps on an AMD EPYC (3.17 against 3.50 ms;
-``make bench``, speed section). So the first Rectifier of each output size in a process times
-both forms on a blank frame of that size (:func:`fixed_point_is_faster`, a few ms once) and
-every Rectifier of that size uses the faster one. The output is the same either way (both
-round to 1/32 px). A nearest-neighbour CV_16SC2 map is derived for depth
+The maps are kept as two CV_32FC1 arrays, which ``cv2.remap`` converts to its fixed-point form
+block by block in cache: on the benchmark machine (Intel Xeon, OpenCV 4.14) that was the
+fastest bilinear remap at 1280x720 and above (1080p mono8: 3.45 ms against 4.07 ms for
+converted CV_16SC2 + CV_16UC1 maps, 2 threads; ``make bench``, speed section), and it spares
+the rebuild a ``cv2.convertMaps`` pass over the whole frame. The output is the same as with
+converted maps (both round to 1/32 px). A nearest-neighbour CV_16SC2 map is derived for depth
 images on first use (no invented depths).
 """
 
 from __future__ import annotations
 
-import math
 import time
 from typing import Any, Sequence
 
@@ -42,44 +40,6 @@ import numpy.typing as npt
 
 #: Where invalid output pixels point: far enough outside any source for BORDER_CONSTANT.
 _OUTSIDE = -1000.0
-#: The faster map form by (raw size, output size, interpolation, OpenCV threads), once per
-#: process (:func:`fixed_point_is_faster`). Written by whichever thread builds first; a race
-#: only repeats the probe.
-_FIXED_FASTER: dict[tuple[int, ...], bool] = {}
-#: Timed remaps of each form in the probe (interleaved; the fastest call counts).
-_PROBE_CALLS = 4
-
-
-def fixed_point_is_faster(map1: np.ndarray, map2: np.ndarray, raw_size: tuple[int, int],
-                          interpolation: int) -> bool:
-    """
-    Return whether converted CV_16SC2 + CV_16UC1 maps remap faster than these float maps.
-
-    Times ``cv2.remap`` of a blank mono8 frame with both forms, interleaved, and keeps the
-    answer for the sizes, interpolation and OpenCV thread count (the first call costs a
-    ``cv2.convertMaps`` and a few remaps: ~25 ms at 1920x1080; later calls nothing).
-
-    :param map1: the x map, CV_32FC1.
-    :param map2: the y map, CV_32FC1.
-    :param raw_size: ``(width, height)`` of the raw frames.
-    :param interpolation: the OpenCV interpolation flag.
-    :return: True when the fixed-point form was faster.
-    """
-    key = (*raw_size, *map1.shape, interpolation, cv2.getNumThreads())
-    known = _FIXED_FASTER.get(key)
-    if known is not None:
-        return known
-    fixed = cv2.convertMaps(map1, map2, cv2.CV_16SC2)
-    src = np.zeros((raw_size[1], raw_size[0]), np.uint8)
-    dst = np.empty(map1.shape, np.uint8)
-    best = {True: math.inf, False: math.inf}
-    for _ in range(_PROBE_CALLS):
-        for form, (m1, m2) in ((False, (map1, map2)), (True, fixed)):
-            start = time.perf_counter()
-            cv2.remap(src, m1, m2, interpolation, dst=dst, borderMode=cv2.BORDER_CONSTANT)
-            best[form] = min(best[form], time.perf_counter() - start)
-    _FIXED_FASTER[key] = best[True] < best[False]
-    return _FIXED_FASTER[key]
 
 
 def _quadrant_scale(model: LensModel, xn: npt.NDArray[np.float32],
@@ -246,14 +206,14 @@ class Rectifier:
     """
 
     def __init__(self, model: LensModel, vignetting: bool | None = None,
-                 fixed_point: bool | None = None, lateral: bool | None = None) -> None:
+                 fixed_point: bool = False, lateral: bool | None = None) -> None:
         """
         Build the float maps (``map1`` = x, ``map2`` = y, CV_32FC1, raw-image pixels).
 
         :param model: the lens model.
         :param vignetting: build the vignetting gain map; None = ``output.vignetting_correction``.
-        :param fixed_point: convert the maps to CV_16SC2 + CV_16UC1 (the same output); None =
-            whichever form remaps faster on this machine (:func:`fixed_point_is_faster`).
+        :param fixed_point: convert the maps to CV_16SC2 + CV_16UC1 (the same output; the
+            stage benchmark compares the two forms in a running relay).
         :param lateral: build the per-channel maps; None = ``output.lateral_color_correction``.
         """
         self.model = model
@@ -275,10 +235,6 @@ class Rectifier:
                     'ends there (black beyond)')
         self.map1, self.map2, self.gain = _build_maps(model, table)
         float_maps = (self.map1, self.map2)
-        if fixed_point is None:
-            fixed_point = fixed_point_is_faster(self.map1, self.map2, (model.width, model.height),
-                                                model.interpolation)
-        self.fixed_point = bool(fixed_point)
         if fixed_point:
             self.map1, self.map2 = cv2.convertMaps(self.map1, self.map2, cv2.CV_16SC2)
         self._nearest_map: np.ndarray | None = None

@@ -95,17 +95,3 @@ def test_distort_then_correct_is_identity_inside(model):
     assert np.abs(back[inner] - scene[inner]).mean() < 0.2
     assert cv2.PSNR(back[inner].astype(np.float64), scene[inner].astype(np.float64),
                     255) > 40
-
-
-def test_both_map_forms_give_the_same_image_and_the_probe_is_kept(model):
-    """The machine-dependent choice of map form changes the speed, never the pixels."""
-    import mechdeconv_ros.remap as remap
-    src = np.random.default_rng(0).integers(0, 256, (model.height, model.width, 3), np.uint8)
-    by_form = {form: Rectifier(model, fixed_point=form) for form in (False, True)}
-    assert by_form[False].map1.dtype == np.float32 and by_form[True].map1.dtype == np.int16
-    assert_array_equal(by_form[False].correct(src), by_form[True].correct(src))
-    chosen = Rectifier(model)
-    key = (model.width, model.height, model.out_height, model.out_width, model.interpolation,
-           cv2.getNumThreads())
-    assert remap._FIXED_FASTER[key] is chosen.fixed_point, 'the probe is kept for the size'
-    assert_array_equal(chosen.correct(src), by_form[False].correct(src))
