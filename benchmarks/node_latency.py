@@ -80,7 +80,7 @@ import struct
 import sys
 import tempfile
 import time
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 from benchmarks.common import LoadMonitor, log, RESULTS
 from benchmarks.report import find_run, machine_info, node_plot, node_tables, write_json
@@ -402,12 +402,19 @@ def latency_stats(frames: Sequence[tuple[int, int]], seconds: float,
 # The child benchmark process (one transport)
 # ---------------------------------------------------------------------------------------------
 
-def bare_remap_ms(width: int, height: int, reps: int) -> dict[str, float]:
-    """Time a plain cv2.remap with the node's maps (rgb8, its default threads), one size."""
+def node_remap(width: int, height: int) -> tuple[Any, Any, Any, Callable[[], None], int]:
+    """
+    Return the node's Case 2 maps at one size, a seeded rgb8 frame and the bare remap.
+
+    :param width: frame width.
+    :param height: frame height.
+    :return: ``(Rectifier, source frame, output, remap call, OpenCV thread count argument)``;
+        the remap is a plain ``cv2.remap`` with the node's maps, and the thread count the
+        node gives ``cv2.setNumThreads`` by default.
+    """
     import cv2
     import numpy as np
 
-    from benchmarks.common import time_ms
     from mechdeconv_ros.model import build_model
     from mechdeconv_ros.params import load_params_file, SPECS
     from mechdeconv_ros.remap import Rectifier
@@ -417,15 +424,26 @@ def bare_remap_ms(width: int, height: int, reps: int) -> dict[str, float]:
     rect = Rectifier(build_model(values, width, height))
     src = np.random.default_rng(0).integers(0, 256, (height, width, 3), dtype=np.uint8)
     dst = np.empty_like(src)
-    previous = cv2.getNumThreads()
+
+    def remap() -> None:
+        cv2.remap(src, rect.map1, rect.map2, cv2.INTER_LINEAR, dst=dst,
+                  borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+
     default = int(SPECS['remap_threads'].default)
-    cv2.setNumThreads(default if default > 0 else -1)      # as correct_node does
+    return rect, src, dst, remap, default if default > 0 else -1     # as correct_node does
+
+
+def bare_remap_ms(width: int, height: int, reps: int) -> dict[str, float]:
+    """Time a plain cv2.remap with the node's maps (rgb8, its default threads), one size."""
+    import cv2
+
+    from benchmarks.common import time_ms
+
+    _, _, _, remap, node_threads = node_remap(width, height)
+    previous = cv2.getNumThreads()
+    cv2.setNumThreads(node_threads)
     threads = cv2.getNumThreads()
     try:
-        def remap() -> None:
-            cv2.remap(src, rect.map1, rect.map2, cv2.INTER_LINEAR, dst=dst,
-                      borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-
         remap()
         samples = time_ms(remap, reps)
     finally:

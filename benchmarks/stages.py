@@ -55,7 +55,8 @@ from typing import Any, Mapping, Sequence
 
 from benchmarks.common import LoadMonitor, log, RESULTS
 from benchmarks.node_latency import (
-    CASE2_YAML, latency_stats, node_argv, Probe, publisher_argv, ros_env, start_child)
+    latency_stats, node_argv, node_remap, Probe, publisher_argv, ros_env,
+    start_child)
 from benchmarks.report import (
     fmt_ms, fmt_num, machine_info, machine_line, markdown_table, verdict, write_json)
 from mechdeconv_ros.graph_env import Child, pick_domain_id
@@ -108,25 +109,11 @@ def bare_remap(width: int, height: int, reps: int, idle_s: float = 1.0 / RATE_HZ
     :return: ``{variant: {'median_ms', 'min_ms'}}``, and the default OpenCV threads.
     """
     import cv2
-    import numpy as np
 
-    from mechdeconv_ros.model import build_model
-    from mechdeconv_ros.params import load_params_file, SPECS
-    from mechdeconv_ros.remap import Rectifier
-
-    values = load_params_file(CASE2_YAML)
-    values.update({'sensor.width_px': 0, 'sensor.height_px': 0})
-    rect = Rectifier(build_model(values, width, height))
-    src = np.random.default_rng(0).integers(0, 256, (height, width, 3), dtype=np.uint8)
-    dst = np.empty_like(src)
+    rect, src, dst, remap, node_threads = node_remap(width, height)
     previous = cv2.getNumThreads()
-    default = int(SPECS['remap_threads'].default)
-    cv2.setNumThreads(default if default > 0 else -1)      # as correct_node does
+    cv2.setNumThreads(node_threads)
     threads = cv2.getNumThreads()
-
-    def remap() -> None:
-        cv2.remap(src, rect.map1, rect.map2, cv2.INTER_LINEAR, dst=dst,
-                  borderMode=cv2.BORDER_CONSTANT, borderValue=0)
 
     # (name, call, OpenCV threads, sleep before each call)
     variants = (('cv2_remap', remap, threads, 0.0),
