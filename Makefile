@@ -31,7 +31,7 @@ test: $(STAMP)
 	$(PY) -m pytest test
 
 demo: $(STAMP)
-	$(PY) -m mechdeconv_ros.demo $(DEMO_ARGS)
+	$(PY) -m mechdeconv_ros.tools.demo $(DEMO_ARGS)
 
 bench: $(STAMP)
 	$(PY) -m pip install --disable-pip-version-check -q -r requirements-bench.txt

@@ -9,8 +9,9 @@ setup(
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*', 'benchmarks', 'benchmarks.*', 'tools',
                                     'tools.*']),
-    # The glass catalogs (mechdeconv_ros/glass.py) travel inside the package for both install
-    # routes (pip wheel and colcon's setup.py build).
+    # The glass catalogs (read by mechdeconv_ros/optics/glass.py) travel inside the package for
+    # both install routes (pip wheel and colcon's setup.py build); find_packages ships the layer
+    # subpackages.
     package_data={package_name: ['data/*.csv']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
@@ -30,9 +31,9 @@ setup(
     extras_require={'test': ['pytest']},
     entry_points={
         'console_scripts': [
-            'correct_node = mechdeconv_ros.correct_node:main',
-            'mechdeconv = mechdeconv_ros.cli:main',
-            'demo_camera = mechdeconv_ros.demo_camera:main',
+            'correct_node = mechdeconv_ros.node.correct_node:main',
+            'mechdeconv = mechdeconv_ros.tools.cli:main',
+            'demo_camera = mechdeconv_ros.tools.demo_camera:main',
         ],
     },
 )

@@ -10,13 +10,13 @@ frame.
 
 * **Per frame**, 1280x720 and 1920x1080 rgb8: ``Rectifier.correct`` with one map (the
   reference, ``output.lateral_color_correction`` false) and with a map per channel (true: the
-  folded remap of :mod:`mechdeconv_ros.channel_remap`). Target: lateral / single <= 1.3.
-* **Bayer**, same sizes, ``bayer_rggb8``: demosaicing (:class:`mechdeconv_ros.debayer.
+  folded remap of :mod:`mechdeconv_ros.imaging.channel_remap`). Target: lateral / single <= 1.3.
+* **Bayer**, same sizes, ``bayer_rggb8``: demosaicing (:class:`mechdeconv_ros.imaging.debayer.
   Demosaicer`, each ``debayer`` method) plus the correction, against the rgb8 correction of
   the same frame size. Target: demosaic + correction / correction <= 1.5.
 * The same two (rgb8 correction; ``vng`` + correction) again at the node's default thread
   count (``remap_threads`` 0: OpenCV's default, every core), where the remap runs on every core
-  and VNG in as many stripes (:mod:`mechdeconv_ros.debayer`); like with like, both ratios.
+  and VNG in as many stripes (:mod:`mechdeconv_ros.imaging.debayer`); like with like, both ratios.
 * **Rebuild** at 1920x1080: ``build_model`` + ``Rectifier`` without and with lateral colour
   (three channel traces and three maps), and the traces alone (``trace_ms``).
 """
@@ -31,10 +31,10 @@ from typing import Any, Mapping
 from benchmarks.common import bench_main, interleave, log, RESULTS, Variant
 from benchmarks.report import machine_info, markdown_table, write_json
 from benchmarks.speed import case2_values
-from mechdeconv_ros.debayer import Demosaicer
-from mechdeconv_ros.model import build_model
-from mechdeconv_ros.params import DEBAYER_METHODS
-from mechdeconv_ros.remap import Rectifier
+from mechdeconv_ros.imaging.debayer import Demosaicer
+from mechdeconv_ros.imaging.remap import Rectifier
+from mechdeconv_ros.model.model import build_model
+from mechdeconv_ros.schema.params import DEBAYER_METHODS
 import numpy as np
 
 FRAME_SIZES = ((1280, 720), (1920, 1080))

@@ -13,11 +13,11 @@ from the frames) with ``image_transport`` raw or compressed. The probe of
 Per row: the delivered ``image_rect`` fps, latency p50/p99 (probe receive time minus the
 publisher's ``header.stamp``: publisher -> node -> probe), the node's CPU use, its own per
 frame time and decode time (means of its 1 Hz diagnostics, medians over the window), and the
-bare decode time of the same JPEG in this process (:func:`mechdeconv_ros.compressed.decode`,
+bare decode time of the same JPEG in this process (:func:`mechdeconv_ros.node.compressed.decode`,
 median), which is what the compressed path adds to the node's work per frame. The picture is
 the demo camera's chart (grid lines on coloured cells), a camera-like JPEG load.
 
-Every process runs with :func:`mechdeconv_ros.graph_env.graph_env` (shared-memory Fast DDS
+Every process runs with :func:`mechdeconv_ros.node.process_env.graph_env` (shared-memory Fast DDS
 profile, ``MALLOC_*``, localhost discovery) on a private domain of the benchmarks' range; the
 machine is shared, so windows that others disturbed are measured again as in node_latency.
 
@@ -39,7 +39,7 @@ from typing import Any, Sequence
 from benchmarks.common import log, RESULTS
 from benchmarks.node_latency import (
     _run_window, CASE2_YAML, paced_publish, Probe, READY_TIMEOUT_S, start_child)
-from mechdeconv_ros.graph_env import graph_env, pick_domain_id
+from mechdeconv_ros.node.process_env import graph_env, pick_domain_id
 
 SIZES = ((1280, 720), (1920, 1080))
 QUICK_SIZES = ((320, 240),)
@@ -52,20 +52,20 @@ DECODE_REPS = 30
 
 def picture(width: int, height: int) -> Any:
     """Return the benchmark picture: the demo camera's chart, RGB uint8."""
-    from mechdeconv_ros.demo_camera import chart_texture
+    from mechdeconv_ros.tools.demo_camera import chart_texture
     return chart_texture(width, height)
 
 
 def jpeg_of(width: int, height: int) -> tuple[str, bytes]:
     """Return ``(format, data)`` of the picture as image_transport would send it (q 90)."""
-    from mechdeconv_ros.compressed import encode
+    from mechdeconv_ros.node.compressed import encode
     return encode(picture(width, height), 'rgb8', 'jpeg', jpeg_quality=JPEG_QUALITY)
 
 
 def bare_decode_ms(width: int, height: int, reps: int = DECODE_REPS) -> dict[str, float]:
-    """Time :func:`mechdeconv_ros.compressed.decode` of the picture's JPEG in this process."""
+    """Time :func:`mechdeconv_ros.node.compressed.decode` of the picture's JPEG in this process."""
     from benchmarks.common import time_ms
-    from mechdeconv_ros.compressed import decode
+    from mechdeconv_ros.node.compressed import decode
     fmt, data = jpeg_of(width, height)
     decode(fmt, data)
     samples = time_ms(lambda: decode(fmt, data), reps)
@@ -88,8 +88,8 @@ def publisher_main(width: int, height: int, rate_hz: float, transport: str) -> i
     from rclpy.signals import SignalHandlerOptions
     from sensor_msgs.msg import CompressedImage
 
-    from mechdeconv_ros.frame_io import sensor_qos
-    from mechdeconv_ros.image_msgs import new_output_image
+    from mechdeconv_ros.node.frame_input import sensor_qos
+    from mechdeconv_ros.node.image_msgs import new_output_image
 
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *_: stop.set())
@@ -123,13 +123,13 @@ def measure(width: int, height: int, transport: str, seconds: float, log_dir: Pa
     """Run node + publisher for one size and transport; return the window's figures."""
     domain = pick_domain_id('benchmarks', salt)
     env = graph_env(domain, shm_profile=True)
-    node_cmd = [sys.executable, '-m', 'mechdeconv_ros.correct_node', '--ros-args',
+    node_cmd = [sys.executable, '-m', 'mechdeconv_ros.node.correct_node', '--ros-args',
                 '--params-file', str(CASE2_YAML), '-p', 'sensor.width_px:=0',
                 '-p', 'sensor.height_px:=0', '-p', f'image_transport:={transport}']
     pub_cmd = [sys.executable, '-m', 'benchmarks.compressed_input', '--role', 'publisher',
                '--width', str(width), '--height', str(height), '--transport', transport]
     name = f'{width}x{height}_{transport}'
-    from mechdeconv_ros.graph_env import configure_this_process
+    from mechdeconv_ros.node.process_env import configure_this_process
     configure_this_process(env)
     probe = Probe(domain, name='bench_probe_' + transport)
     node = start_child(node_cmd, env, log_dir, f'node_{name}')

@@ -33,13 +33,13 @@ from typing import Any
 
 from benchmarks.common import bench_main, interleave, log, RESULTS, Variant
 from benchmarks.report import write_json
-from mechdeconv_ros.lens_import import import_zmx, Medium
-from mechdeconv_ros.lens_params import make_prescription
-from mechdeconv_ros.model import build_model
-from mechdeconv_ros.params import check_values
-from mechdeconv_ros.prescription import paraxial, vertex_z
-from mechdeconv_ros.raytrace import trace_field_angles
-from mechdeconv_ros.zmx import LensImportError
+from mechdeconv_ros.lenses.lens_import import import_zmx, Medium
+from mechdeconv_ros.lenses.lens_params import make_prescription
+from mechdeconv_ros.lenses.zmx import LensImportError
+from mechdeconv_ros.model.model import build_model
+from mechdeconv_ros.optics.prescription import paraxial, vertex_z
+from mechdeconv_ros.optics.raytrace import trace_field_angles
+from mechdeconv_ros.schema.params import check_values
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]

@@ -4,13 +4,13 @@
 The ROS 2 node end to end: throughput, latency and parameter-set reaction, vs a pass-through.
 
 Three processes per measurement, all with the graph environment of
-:func:`mechdeconv_ros.graph_env.graph_env` (``MALLOC_*``, discovery limited to localhost) and a
-private ``ROS_DOMAIN_ID`` (the benchmarks' range):
+:func:`mechdeconv_ros.node.process_env.graph_env` (``MALLOC_*``, discovery limited to localhost)
+and a private ``ROS_DOMAIN_ID`` (the benchmarks' range):
 
 * a **publisher** (``python -m benchmarks.node_latency --role publisher``): one prebuilt
   sensor_msgs/Image (rgb8), ``header.stamp`` set to the wall clock just before each publish,
   paced at 30 Hz, 60 Hz or the serial bound (below), or as fast as it can (flat out);
-* the **node under test**: ``python -m mechdeconv_ros.correct_node --ros-args --params-file
+* the **node under test**: ``python -m mechdeconv_ros.node.correct_node --ros-args --params-file
   config/case2.yaml -p sensor.width_px:=0 -p sensor.height_px:=0`` (the sensor size from the
   frames), or the **pass-through** baseline :mod:`benchmarks.passthrough_node` (subscribe and
   republish, same QoS, same transport);
@@ -61,8 +61,8 @@ The machine is shared: how many cores other processes kept busy is recorded per 
 window during which they kept more than 0.3 cores busy is measured once more (the stream keeps
 running); the less disturbed window is kept and the other recorded under ``discarded``.
 
-Every process is a :class:`mechdeconv_ros.graph_env.Child`: started in its own process group,
-stopped by SIGINT to the group (then SIGTERM, SIGKILL if it hangs); exit codes are recorded
+Every process is a :class:`mechdeconv_ros.node.process_env.Child`: started in its own process
+group, stopped by SIGINT to the group (then SIGTERM, SIGKILL if it hangs); exit codes are recorded
 and a non-zero one, or an escalation, is reported.
 """
 
@@ -84,7 +84,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 from benchmarks.common import LoadMonitor, log, RESULTS
 from benchmarks.report import find_run, machine_info, node_plot, node_tables, write_json
-from mechdeconv_ros.graph_env import Child, graph_env, MALLOC_ENV, pick_domain_id
+from mechdeconv_ros.node.process_env import Child, graph_env, MALLOC_ENV, pick_domain_id
 
 REPO = Path(__file__).resolve().parents[1]
 CASE2_YAML = REPO / 'config' / 'case2.yaml'
@@ -132,7 +132,7 @@ def ros_env(domain_id: int, transport: str) -> dict[str, str]:
 
     :param domain_id: the private ROS_DOMAIN_ID.
     :param transport: ``'shm'`` (the package's Fast DDS profile) or ``'default'``.
-    :return: :func:`mechdeconv_ros.graph_env.graph_env` (the package's settings, not the
+    :return: :func:`mechdeconv_ros.node.process_env.graph_env` (the package's settings, not the
         caller's).
     """
     return graph_env(domain_id, shm_profile=transport == 'shm')
@@ -147,7 +147,7 @@ def start_child(argv: Sequence[str], env: Mapping[str, str], log_dir: Path,
 def node_argv(kind: str) -> list[str]:
     """Return the command of the node under test (``'node'``) or of the pass-through."""
     if kind == 'node':
-        return [sys.executable, '-m', 'mechdeconv_ros.correct_node', '--ros-args',
+        return [sys.executable, '-m', 'mechdeconv_ros.node.correct_node', '--ros-args',
                 '--params-file', str(CASE2_YAML), '-p', 'sensor.width_px:=0',
                 '-p', 'sensor.height_px:=0']
     return [sys.executable, '-m', 'benchmarks.passthrough_node']
@@ -173,8 +173,8 @@ def publisher_main(width: int, height: int, rate_hz: float) -> int:
     from rclpy.signals import SignalHandlerOptions
     from sensor_msgs.msg import Image
 
-    from mechdeconv_ros.frame_io import sensor_qos
-    from mechdeconv_ros.image_msgs import new_output_image
+    from mechdeconv_ros.node.frame_input import sensor_qos
+    from mechdeconv_ros.node.image_msgs import new_output_image
 
     # Our own SIGINT handler (rclpy's would shut the context down under a running publish()
     # and raise KeyboardInterrupt at an arbitrary point): stop the loop, then clean up.
@@ -415,9 +415,9 @@ def node_remap(width: int, height: int) -> tuple[Any, Any, Any, Callable[[], Non
     import cv2
     import numpy as np
 
-    from mechdeconv_ros.model import build_model
-    from mechdeconv_ros.params import load_params_file, SPECS
-    from mechdeconv_ros.remap import Rectifier
+    from mechdeconv_ros.imaging.remap import Rectifier
+    from mechdeconv_ros.model.model import build_model
+    from mechdeconv_ros.schema.params import load_params_file, SPECS
 
     values = load_params_file(CASE2_YAML)
     values.update({'sensor.width_px': 0, 'sensor.height_px': 0})

@@ -5,7 +5,7 @@ A pass-through node: the transport-only baseline of the node benchmarks, and its
 
 It does what ``correct_node`` does minus the correction: subscribes ``image_raw`` and
 publishes every frame it receives on ``image_rect``, with the same QoS (best effort, keep
-last 1, volatile: :func:`mechdeconv_ros.frame_io.sensor_qos`) and the same transport (the
+last 1, volatile: :func:`mechdeconv_ros.node.frame_input.sensor_qos`) and the same transport (the
 process environment decides it). The received message is republished as it is, so the
 Python side adds no copy: what remains is rclpy's receive conversion, the executor and the
 publish, the cost every Python relay pays per frame.
@@ -14,8 +14,8 @@ publish, the cost every Python relay pays per frame.
 (the stage benchmark, :mod:`benchmarks.stages`, runs each rung):
 
 * ``relay`` (default): republish the received message;
-* ``copy``: read the pixels (:func:`~mechdeconv_ros.frame_io.read_image`), copy them into a
-  pooled output message (:class:`~mechdeconv_ros.image_msgs.OutputImagePool`) and publish
+* ``copy``: read the pixels (:func:`~mechdeconv_ros.node.frame_input.read_image`), copy them into a
+  pooled output message (:class:`~mechdeconv_ros.node.image_msgs.OutputImagePool`) and publish
   that: the conversion and the message fill, without the remap;
 * ``remap``: the same with ``Rectifier.correct`` (Case 2 model of the frame's size, built at
   the first frame) instead of the copy;
@@ -28,7 +28,7 @@ publish, the cost every Python relay pays per frame.
 What remains between the last rung and ``correct_node`` is the node itself: the live model's
 reference read, counters, diagnostics timer, parameter callbacks, matched-event waitables and
 the rebuild and summary threads. With ``MECHDECONV_STAGE_TIMES`` set the relay times its
-stages as correct_node does (:mod:`mechdeconv_ros.stage_clock`).
+stages as correct_node does (:mod:`mechdeconv_ros.node.stage_clock`).
 
 Run::
 
@@ -46,10 +46,10 @@ from pathlib import Path
 import sys
 from typing import Any
 
-from mechdeconv_ros.diagnostics import FrameStats
-from mechdeconv_ros.frame_io import read_image, sensor_qos
-from mechdeconv_ros.image_msgs import camera_infos_from_model, OutputImagePool
-from mechdeconv_ros.stage_clock import stage_clock_from_env
+from mechdeconv_ros.node.diagnostics import FrameStats
+from mechdeconv_ros.node.frame_input import read_image, sensor_qos
+from mechdeconv_ros.node.image_msgs import camera_infos_from_model, OutputImagePool
+from mechdeconv_ros.node.stage_clock import stage_clock_from_env
 import numpy as np
 import rclpy
 from rclpy.executors import (
@@ -87,9 +87,9 @@ class PassthroughNode(Node):
 
     def _model_for(self, width: int, height: int) -> Any:
         if self._model is None or self._model[0] != (width, height):
-            from mechdeconv_ros.model import build_model
-            from mechdeconv_ros.params import load_params_file
-            from mechdeconv_ros.remap import Rectifier
+            from mechdeconv_ros.imaging.remap import Rectifier
+            from mechdeconv_ros.model.model import build_model
+            from mechdeconv_ros.schema.params import load_params_file
             values = load_params_file(CASE2_YAML)
             values.update({'sensor.width_px': 0, 'sensor.height_px': 0})
             model = build_model(values, width, height)

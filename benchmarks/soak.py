@@ -7,7 +7,7 @@ The long run: correct_node at full rate for minutes, its memory sampled every se
 
 Three processes, with the environment of :func:`benchmarks.node_latency.ros_env` (the package's
 Fast DDS profile, the Makefile's ``MALLOC_*`` settings, discovery on localhost) and a private
-``ROS_DOMAIN_ID`` (the soak's range of :data:`mechdeconv_ros.graph_env.DOMAIN_RANGES`):
+``ROS_DOMAIN_ID`` (the soak's range of :data:`mechdeconv_ros.node.process_env.DOMAIN_RANGES`):
 
 * the publisher of :mod:`benchmarks.node_latency` (``--role publisher``): one 1280x720 rgb8
   frame, paced at 30 Hz, stamped with the wall clock;
@@ -48,7 +48,7 @@ from typing import Any, Sequence
 from benchmarks.common import LoadMonitor, log, RESULTS
 from benchmarks.node_latency import node_argv, Probe, publisher_argv, ros_env, start_child
 from benchmarks.report import machine_info, soak_plot, soak_report, write_json
-from mechdeconv_ros.graph_env import Child, configure_this_process, pick_domain_id
+from mechdeconv_ros.node.process_env import Child, configure_this_process, pick_domain_id
 
 WIDTH, HEIGHT, RATE_HZ = 1280, 720, 30.0
 SET_EVERY_S = 30.0

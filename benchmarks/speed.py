@@ -40,9 +40,9 @@ from typing import Any, Mapping
 from benchmarks.common import bench_main, interleave, log, RESULTS, Variant
 from benchmarks.report import best_variant, machine_info, speed_plots, speed_tables, write_json
 import cv2
-from mechdeconv_ros.model import build_model, LensModel
-from mechdeconv_ros.params import load_params_file
-from mechdeconv_ros.remap import build_float_maps, Rectifier
+from mechdeconv_ros.imaging.remap import build_float_maps, Rectifier
+from mechdeconv_ros.model.model import build_model, LensModel
+from mechdeconv_ros.schema.params import load_params_file
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]

@@ -12,7 +12,7 @@ each adds one of correct_node's stages, with the node's code), ``correct_node`` 
 the side rung ``remap_fixed`` (``remap`` with fixed-point maps: the map form is chosen on
 what it costs in a running relay, caches shared between frames) run one at a time between
 the same publisher and probe, every process with
-``MECHDECONV_STAGE_TIMES`` set (:mod:`mechdeconv_ros.stage_clock`):
+``MECHDECONV_STAGE_TIMES`` set (:mod:`mechdeconv_ros.node.stage_clock`):
 
 * **receive** = callback entry - ``header.stamp`` (publisher's wall clock at publish): the
   publish, the transport, the executor's wait and take, rclpy's conversion;
@@ -23,7 +23,7 @@ the same publisher and probe, every process with
 * **p50** = probe receive - stamp (two hops, as node_latency), median over the window;
 * **CPU ms / frame** of the relay process per thread (``/proc/PID/task``): the executor
   (main) thread, the rebuild and summary threads (named by
-  :func:`mechdeconv_ros.live_model.name_native_thread`), and every other thread (OpenCV's
+  :func:`mechdeconv_ros.imaging.live_model.name_native_thread`), and every other thread (OpenCV's
   workers, Fast DDS's) over the window.
 
 Stage values are medians over the window's frames (so the stages need not add up to the p50
@@ -59,8 +59,8 @@ from benchmarks.node_latency import (
     start_child)
 from benchmarks.report import (
     fmt_ms, fmt_num, machine_info, machine_line, markdown_table, verdict, write_json)
-from mechdeconv_ros.graph_env import Child, pick_domain_id
-from mechdeconv_ros.stage_clock import ENV as STAGE_ENV
+from mechdeconv_ros.node.process_env import Child, pick_domain_id
+from mechdeconv_ros.node.stage_clock import ENV as STAGE_ENV
 
 SIZES = ((1280, 720), (1920, 1080))
 QUICK_SIZES = ((320, 240),)
@@ -200,7 +200,8 @@ def _rung_argv(rung: str, baseline: str = '') -> list[str]:
     if rung == 'baseline':
         # correct_node of another checkout (its path first on sys.path, before the cwd).
         return [sys.executable, '-c', f'import sys; sys.path.insert(0, {baseline!r}); '
-                'from mechdeconv_ros.correct_node import main; main()'] + node_argv('node')[3:]
+                'from mechdeconv_ros.node.correct_node import main; main()'] \
+            + node_argv('node')[3:]
     return [sys.executable, '-m', 'benchmarks.passthrough_node', '--upto', rung]
 
 

@@ -14,7 +14,7 @@ Everything runs in one process, in interleaved rounds (:func:`benchmarks.common.
   gain (the remap alone), the gain alone (``cv2.multiply`` of the remapped frame by the float32
   gain map, in place, saturating) and both. Target: gain <= remap.
 * **Accuracy**: the traced RI against the independent flux counts of
-  :mod:`mechdeconv_ros.illumination` (``forward_flux``: rays uniform over the scene and an
+  :mod:`mechdeconv_ros.optics.illumination` (``forward_flux``: rays uniform over the scene and an
   entrance disk; ``stop_flux``: uniform over the stop and its direction cosines), as annulus
   means, in percentage points of the on-axis irradiance. Target: 0.5.
 """
@@ -31,11 +31,11 @@ from benchmarks.common import bench_main, interleave, log, RESULTS, Variant
 from benchmarks.report import machine_info, markdown_table, write_json
 from benchmarks.speed import case2_values
 import cv2
-from mechdeconv_ros import illumination as il
-from mechdeconv_ros.model import build_model
-from mechdeconv_ros.params import load_params_file
-from mechdeconv_ros.raytrace import image_plane
-from mechdeconv_ros.remap import Rectifier
+from mechdeconv_ros.imaging.remap import Rectifier
+from mechdeconv_ros.model.model import build_model
+from mechdeconv_ros.optics import illumination as il
+from mechdeconv_ros.optics.raytrace import image_plane
+from mechdeconv_ros.schema.params import load_params_file
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]

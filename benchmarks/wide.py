@@ -33,9 +33,9 @@ from typing import Any
 
 from benchmarks.common import bench_main, interleave, log, RESULTS
 from benchmarks.report import write_json
-from mechdeconv_ros.model import build_model
-from mechdeconv_ros.params import defaults, load_params_file
-from mechdeconv_ros.remap import Rectifier
+from mechdeconv_ros.imaging.remap import Rectifier
+from mechdeconv_ros.model.model import build_model
+from mechdeconv_ros.schema.params import defaults, load_params_file
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]

@@ -9,11 +9,11 @@ pixels (the same 24 x 13.5 mm sensor); ``zoom`` sweeps its whole range, 0 -> 1 i
 
 1. **Strategy** (no ROS): the cost of the two ways to correct a frame of a moving lens, in
    the same process: a full model and its maps per frame (``build_model`` + ``Rectifier``)
-   against the precomputed grid (:mod:`mechdeconv_ros.moving_maps`: grid build time and
+   against the precomputed grid (:mod:`mechdeconv_ros.imaging.moving_maps`: grid build time and
    memory once; per frame the blend and the one ``cv2.resize``); and the bare remap.
 2. **Accuracy** (no ROS): for every frame of one 2 s sweep (61 frames), the lens state at its
-   stamp from a :class:`~mechdeconv_ros.lens_state.LensStateHistory` fed as the node feeds it
-   (JointState at 100 Hz and one with each frame's stamp), the grid's map of that state
+   stamp from a :class:`~mechdeconv_ros.imaging.lens_state.LensStateHistory` fed as the node feeds
+   it (JointState at 100 Hz and one with each frame's stamp), the grid's map of that state
    against the EXACT model of the true state at the stamp (``build_model`` + float maps):
    the largest displacement over the output image (px). Target: >= 95 % of frames within
    0.1 px, and no frame's state more than one table step from the true one.
@@ -49,7 +49,7 @@ from typing import Any
 from benchmarks.common import log, RESULTS
 from benchmarks.node_latency import latency_stats, start_child
 from benchmarks.report import machine_info, write_json
-from mechdeconv_ros.graph_env import graph_env, pick_domain_id
+from mechdeconv_ros.node.process_env import graph_env, pick_domain_id
 
 REPO = Path(__file__).resolve().parents[1]
 ZOOM_YAML = REPO / 'config' / 'zoom.yaml'
@@ -75,7 +75,7 @@ def sweep(t: float) -> float:
 
 def zoom_values(width: int, height: int) -> dict[str, Any]:
     """Return config/zoom.yaml at a frame size, the pixel pitch keeping the sensor size."""
-    from mechdeconv_ros.params import check_values, load_params_file
+    from mechdeconv_ros.schema.params import check_values, load_params_file
     values = dict(load_params_file(ZOOM_YAML))
     values.update({'sensor.width_px': width, 'sensor.height_px': height,
                    'sensor.pixel_size_x_um': SENSOR_MM[0] / width * 1e3,
@@ -97,8 +97,8 @@ def _overrides(width: int, height: int) -> list[str]:
 # ---------------------------------------------------------------------------------------------
 
 def _grid(values: dict[str, Any]) -> Any:
-    from mechdeconv_ros.model import build_model
-    from mechdeconv_ros.moving_maps import moving_rectifier
+    from mechdeconv_ros.imaging.moving_maps import moving_rectifier
+    from mechdeconv_ros.model.model import build_model
     model = build_model(values)
     return moving_rectifier(model, build_model)
 
@@ -110,10 +110,10 @@ def strategy_and_accuracy(width: int, height: int, frames: int, reps: int) -> di
     from tqdm import tqdm
 
     from benchmarks.common import time_ms
-    from mechdeconv_ros.lens_state import LensStateHistory
-    from mechdeconv_ros.lens_table import mechanisms, values_at
-    from mechdeconv_ros.model import build_model
-    from mechdeconv_ros.remap import build_float_maps, Rectifier
+    from mechdeconv_ros.imaging.lens_state import LensStateHistory
+    from mechdeconv_ros.imaging.remap import build_float_maps, Rectifier
+    from mechdeconv_ros.lenses.lens_table import mechanisms, values_at
+    from mechdeconv_ros.model.model import build_model
 
     values = zoom_values(width, height)
     (zoom,) = mechanisms(values)
@@ -182,8 +182,8 @@ def publisher_main(width: int, height: int, seconds: float) -> int:
     from rclpy.signals import SignalHandlerOptions
     from sensor_msgs.msg import Image, JointState
 
-    from mechdeconv_ros.frame_io import sensor_qos
-    from mechdeconv_ros.image_msgs import new_output_image
+    from mechdeconv_ros.node.frame_input import sensor_qos
+    from mechdeconv_ros.node.image_msgs import new_output_image
 
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *_: stop.set())
@@ -312,7 +312,7 @@ def _node_argv(kind: str, width: int, height: int) -> list[str]:
     if kind in ('node', 'still'):
         # 'still': the same lens with its zoom joint off (the first rows, no lens_state).
         still = ['-p', 'lens.zoom.joint:=""'] if kind == 'still' else []
-        return [sys.executable, '-m', 'mechdeconv_ros.correct_node', '--ros-args',
+        return [sys.executable, '-m', 'mechdeconv_ros.node.correct_node', '--ros-args',
                 '--params-file', str(ZOOM_YAML)] + _overrides(width, height) + still
     return [sys.executable, '-m', 'benchmarks.passthrough_node']
 

@@ -39,7 +39,7 @@ from launch.actions import DeclareLaunchArgument, GroupAction, SetEnvironmentVar
 from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
-from mechdeconv_ros.graph_env import FASTDDS_PROFILE_NAME, PROFILE_VAR
+from mechdeconv_ros.node.process_env import FASTDDS_PROFILE_NAME, PROFILE_VAR
 
 PACKAGE = 'mechdeconv_ros'
 

@@ -4,12 +4,12 @@
 Helpers for the tests that run real ROS 2 processes (no mocks).
 
 * :func:`next_domain_id` gives every node launch of a test run its own ``ROS_DOMAIN_ID``
-  (the tests' range of :data:`mechdeconv_ros.graph_env.DOMAIN_RANGES`, pid-derived, so
+  (the tests' range of :data:`mechdeconv_ros.node.process_env.DOMAIN_RANGES`, pid-derived, so
   parallel runs on one machine do not see each other), and :func:`ros_env` the environment
-  for it (:func:`mechdeconv_ros.graph_env.graph_env`: discovery limited to localhost and the
+  for it (:func:`mechdeconv_ros.node.process_env.graph_env`: discovery limited to localhost and the
   package's Fast DDS profile, whose big shared-memory segment lets large best-effort frames
   arrive).
-* :class:`NodeProcess` is :class:`mechdeconv_ros.graph_env.Child` with ``<name>.out`` and
+* :class:`NodeProcess` is :class:`mechdeconv_ros.node.process_env.Child` with ``<name>.out`` and
   ``<name>.err`` logs: a node in its own process group, stopped with SIGINT to the group
   (escalating to SIGTERM, SIGKILL), returning the exit code; its context manager kills the
   group if anything goes wrong, so no process outlives a test.
@@ -29,8 +29,8 @@ import sys
 import time
 from typing import Any, Callable, Iterator, Sequence
 
-from mechdeconv_ros import graph_env
-from mechdeconv_ros.graph_env import Child
+from mechdeconv_ros.node import process_env
+from mechdeconv_ros.node.process_env import Child
 import numpy as np
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.srv import GetParameters, SetParameters, SetParametersAtomically
@@ -42,7 +42,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 REPO = Path(__file__).resolve().parents[1]
-FASTDDS_PROFILE = graph_env.fastdds_profile()
+FASTDDS_PROFILE = process_env.fastdds_profile()
 NODE_NAME = 'correct_node'
 
 #: Best effort, keep last: what the node publishes and subscribes with by default.
@@ -58,7 +58,7 @@ def next_domain_id() -> int:
 
     :return: the domain id, in the tests' range (1-100).
     """
-    return graph_env.pick_domain_id('tests', next(_domain_counter))
+    return process_env.pick_domain_id('tests', next(_domain_counter))
 
 
 def ros_env(domain_id: int, extra: dict[str, str] | None = None) -> dict[str, str]:
@@ -69,7 +69,7 @@ def ros_env(domain_id: int, extra: dict[str, str] | None = None) -> dict[str, st
     :param extra: more variables (override the rest).
     :return: a copy of ``os.environ`` with the graph's settings and the repo on PYTHONPATH.
     """
-    return graph_env.graph_env(domain_id, extra=extra)
+    return process_env.graph_env(domain_id, extra=extra)
 
 
 def configure_test_process() -> None:
@@ -79,7 +79,7 @@ def configure_test_process() -> None:
     Fast DDS reads its profile file once per process, at the first participant, so this must
     run before any ``rclpy.init`` of the session.
     """
-    graph_env.configure_this_process(graph_env.graph_env(0))
+    process_env.configure_this_process(process_env.graph_env(0))
 
 
 class NodeProcess(Child):
@@ -103,7 +103,7 @@ class NodeProcess(Child):
 
         :param sig: the signal (SIGINT, as Ctrl-C in ``ros2 run``).
         :param timeout: seconds to wait.
-        :param kwargs: see :meth:`mechdeconv_ros.graph_env.Child.stop`.
+        :param kwargs: see :meth:`mechdeconv_ros.node.process_env.Child.stop`.
         :return: the exit code (negative: killed by a signal).
         """
         return super().stop(sig, timeout, **kwargs)
@@ -141,10 +141,10 @@ def node_command(params_file: Path | None, *overrides: str,
 
     :param params_file: the ``--params-file`` (None: none).
     :param overrides: ``name:=value`` strings.
-    :param executable: the program (default: ``python -m mechdeconv_ros.correct_node``).
+    :param executable: the program (default: ``python -m mechdeconv_ros.node.correct_node``).
     :return: argv.
     """
-    argv = list(executable or [sys.executable, '-m', 'mechdeconv_ros.correct_node'])
+    argv = list(executable or [sys.executable, '-m', 'mechdeconv_ros.node.correct_node'])
     argv.append('--ros-args')
     if params_file is not None:
         argv += ['--params-file', str(params_file)]

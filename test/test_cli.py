@@ -10,8 +10,8 @@ import subprocess
 import sys
 
 import cv2
-from mechdeconv_ros.cli import main
-from mechdeconv_ros.model import build_model
+from mechdeconv_ros.model.model import build_model
+from mechdeconv_ros.tools.cli import main
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest
@@ -110,7 +110,7 @@ def test_plot_writes_a_png(tmp_path, capsys):
         'no-size', 'missing-image', 'focus-inside-f', 'stop-behind-sensor', 'aperture-1000',
         'circle-of-confusion'])
 def test_bad_input_is_one_line_and_status_2(argv, words):
-    proc = subprocess.run([sys.executable, '-m', 'mechdeconv_ros.cli', *argv],
+    proc = subprocess.run([sys.executable, '-m', 'mechdeconv_ros.tools.cli', *argv],
                           capture_output=True, text=True, cwd=ROOT, timeout=60)
     assert proc.returncode == 2
     assert 'Traceback' not in proc.stderr
@@ -121,7 +121,7 @@ def test_bad_input_is_one_line_and_status_2(argv, words):
 def test_unreadable_image(tmp_path):
     bad = tmp_path / 'bad.png'
     bad.write_text('not an image')
-    proc = subprocess.run([sys.executable, '-m', 'mechdeconv_ros.cli', 'correct', '--params',
+    proc = subprocess.run([sys.executable, '-m', 'mechdeconv_ros.tools.cli', 'correct', '--params',
                            CASE2, str(bad), str(tmp_path / 'o.png')],
                           capture_output=True, text=True, cwd=ROOT, timeout=60)
     assert proc.returncode == 2
@@ -133,7 +133,7 @@ def test_params_file_that_describes_no_camera(tmp_path):
     text = Path(CASE2).read_text().replace('focus_distance_mm: 0.0', 'focus_distance_mm: 3.0')
     bad = tmp_path / 'bad.yaml'
     bad.write_text(text)
-    proc = subprocess.run([sys.executable, '-m', 'mechdeconv_ros.cli', 'info', '--params',
+    proc = subprocess.run([sys.executable, '-m', 'mechdeconv_ros.tools.cli', 'info', '--params',
                            str(bad)], capture_output=True, text=True, cwd=ROOT, timeout=60)
     assert proc.returncode == 2
     assert proc.stderr.strip().startswith('mechdeconv: error: scene.focus_distance_mm: 3 mm')
@@ -145,7 +145,7 @@ def test_unusual_values_warn_once_on_stderr(tmp_path):
     folder.mkdir()
     for name in ('a.png', 'b.png', 'c.png'):
         cv2.imwrite(str(folder / name), np.full((48, 64), 100, np.uint8))
-    proc = subprocess.run([sys.executable, '-m', 'mechdeconv_ros.cli', 'correct', '--params',
+    proc = subprocess.run([sys.executable, '-m', 'mechdeconv_ros.tools.cli', 'correct', '--params',
                            CASE2, '-p', 'lens.stop_offset_mm=7', str(folder),
                            str(tmp_path / 'out')],
                           capture_output=True, text=True, cwd=ROOT, timeout=60)
@@ -155,8 +155,8 @@ def test_unusual_values_warn_once_on_stderr(tmp_path):
 
 
 def test_lens_state_evaluates_the_moving_lens(capsys, tmp_path):
-    from mechdeconv_ros.lens_table import values_at
-    from mechdeconv_ros.params import load_params_file
+    from mechdeconv_ros.lenses.lens_table import values_at
+    from mechdeconv_ros.schema.params import load_params_file
 
     zoom = str(CONFIG / 'zoom.yaml')
     status, out, err = run(capsys, 'info', '--params', zoom, '--lens-state', 'zoom=0.4',
@@ -180,7 +180,7 @@ def test_lens_state_evaluates_the_moving_lens(capsys, tmp_path):
     status, _, err = run(capsys, 'correct', '--params', zoom, '--lens-state', 'zoom=1',
                          str(tmp_path / 'in.png'), str(tmp_path / 'out.png'))
     assert status == 0, err
-    from mechdeconv_ros.remap import Rectifier
+    from mechdeconv_ros.imaging.remap import Rectifier
     expected = Rectifier(long_end).correct(image)
     assert np.array_equal(cv2.imread(str(tmp_path / 'out.png'), cv2.IMREAD_UNCHANGED), expected)
 

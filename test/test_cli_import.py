@@ -13,18 +13,18 @@ import importlib.util
 import json
 from pathlib import Path
 
-from mechdeconv_ros.cli import main
-from mechdeconv_ros.datasheet_csv import read_table, table_values
-from mechdeconv_ros.params import load_params_file, SPECS
-from mechdeconv_ros.zmx import LensImportError
+from mechdeconv_ros.lenses.datasheet_csv import read_table, table_values
+from mechdeconv_ros.lenses.zmx import LensImportError
+from mechdeconv_ros.schema.params import load_params_file, SPECS
+from mechdeconv_ros.tools.cli import main
 from numpy.testing import assert_allclose
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 ZMX = ROOT / 'test' / 'data' / 'zmx'
-HAVE_GLASS = importlib.util.find_spec('mechdeconv_ros.glass') is not None
+HAVE_GLASS = importlib.util.find_spec('mechdeconv_ros.optics.glass') is not None
 HAVE_DATASHEET = 'lens.datasheet.field_angle_deg' in SPECS
-needs_glass = pytest.mark.skipif(not HAVE_GLASS, reason='needs mechdeconv_ros.glass')
+needs_glass = pytest.mark.skipif(not HAVE_GLASS, reason='needs mechdeconv_ros.optics.glass')
 
 TABLE = """field angle (deg), real image height (mm)
 0, 0

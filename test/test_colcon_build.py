@@ -15,12 +15,14 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+import shutil
 import signal
 import subprocess
 import sys
 import sysconfig
+import zipfile
 
-from mechdeconv_ros.image_msgs import image_to_array
+from mechdeconv_ros.node.image_msgs import image_to_array
 import numpy as np
 import pytest
 from rclpy.parameter import Parameter
@@ -89,7 +91,10 @@ def test_build_installs_the_executable_and_the_config(install: Path) -> None:
     assert (share / 'launch' / 'correct.launch.py').is_file()
     assert (install / PACKAGE / 'share' / 'ament_index' / 'resource_index' / 'packages'
             / PACKAGE).is_file()
-    assert (site_packages(install) / PACKAGE / 'correct_node.py').is_file()
+    # Every layer subpackage is shipped, each with its __init__.py.
+    for layer in ('schema', 'optics', 'lenses', 'model', 'imaging', 'node', 'tools'):
+        assert (site_packages(install) / PACKAGE / layer / '__init__.py').is_file(), layer
+    assert (site_packages(install) / PACKAGE / 'node' / 'correct_node.py').is_file()
     # Package data (the glass catalogs) is installed with the modules.
     assert (site_packages(install) / PACKAGE / 'data' / 'glass_catalogs.csv').is_file()
 
@@ -97,7 +102,7 @@ def test_build_installs_the_executable_and_the_config(install: Path) -> None:
 def test_installed_package_reads_its_glass_catalogs(install: Path, tmp_path: Path) -> None:
     env = installed_env(install, next_domain_id())
     probe = subprocess.run(
-        [sys.executable, '-c', 'import mechdeconv_ros.glass as g; '
+        [sys.executable, '-c', 'import mechdeconv_ros.optics.glass as g; '
          'print(g.__file__); print(g.refractive_index("N-BK7", 587.5618))'],
         env=env, cwd=tmp_path, capture_output=True, text=True, timeout=60)
     assert probe.returncode == 0, probe.stderr
@@ -148,3 +153,25 @@ def test_installed_node_corrects_a_frame_and_exits_cleanly(
         log = proc.output()
     assert code == 0, log[-3000:]
     assert 'Traceback' not in log, log[-3000:]
+
+
+def test_the_pip_wheel_ships_the_layers_and_the_package_data(tmp_path: Path) -> None:
+    """``pip wheel .`` (the other install route) holds every layer, its modules and the data."""
+    # A copy of what the build reads, so that setuptools' build/ is not written into the repo.
+    src = tmp_path / 'src'
+    src.mkdir()
+    for name in ('setup.py', 'setup.cfg', 'package.xml', 'resource', PACKAGE, 'config', 'launch'):
+        copy = shutil.copytree if (REPO / name).is_dir() else shutil.copy
+        copy(REPO / name, src / name, **({'ignore': shutil.ignore_patterns('__pycache__')}
+                                         if (REPO / name).is_dir() else {}))
+    build = subprocess.run(
+        [sys.executable, '-m', 'pip', 'wheel', '--no-deps', '--no-build-isolation', '-q',
+         '--disable-pip-version-check', '-w', str(tmp_path), str(src)],
+        capture_output=True, text=True, timeout=300)
+    assert build.returncode == 0, build.stdout[-2000:] + build.stderr[-2000:]
+    (wheel,) = tmp_path.glob('mechdeconv_ros-*.whl')
+    names = set(zipfile.ZipFile(wheel).namelist())
+    source = {str(p.relative_to(REPO)) for p in (REPO / PACKAGE).rglob('*.py')}
+    assert source, 'no modules found in the checkout'
+    assert source <= names, f'missing from the wheel: {sorted(source - names)[:5]}'
+    assert f'{PACKAGE}/data/glass_catalogs.csv' in names

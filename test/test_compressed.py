@@ -1,17 +1,17 @@
 # Copyright 2026 The mechdeconv_ros Authors.
 # SPDX-License-Identifier: Apache-2.0
-"""Tests of mechdeconv_ros.compressed: CompressedImage format strings, JPEG/PNG decoding."""
+"""Tests of mechdeconv_ros.node.compressed: CompressedImage format strings, JPEG/PNG decoding."""
 
 from __future__ import annotations
 
 import array
 
 import cv2
-from mechdeconv_ros.compressed import (
+from mechdeconv_ros.node.compressed import (
     CompressedFormat, decode, encode, parse_format, sniff_codec, UndecodableImageError,
     UnsupportedCompressedFormatError)
-from mechdeconv_ros.image_msgs import MalformedImageError, UnsupportedEncodingError
-from mechdeconv_ros.params import MAX_SIDE_PX
+from mechdeconv_ros.node.image_msgs import MalformedImageError, UnsupportedEncodingError
+from mechdeconv_ros.schema.params import MAX_SIDE_PX
 import numpy as np
 import numpy.testing as npt
 import pytest

@@ -19,11 +19,11 @@ import sys
 import time
 from typing import Any, Iterator
 
-from mechdeconv_ros.compressed import decode
-from mechdeconv_ros.demo_camera import Chart, convert_rgb, DemoCamera
-from mechdeconv_ros.model import build_model
-from mechdeconv_ros.params import load_params_file
-from mechdeconv_ros.remap import Rectifier
+from mechdeconv_ros.imaging.remap import Rectifier
+from mechdeconv_ros.model.model import build_model
+from mechdeconv_ros.node.compressed import decode
+from mechdeconv_ros.schema.params import load_params_file
+from mechdeconv_ros.tools.demo_camera import Chart, convert_rgb, DemoCamera
 from numpy.testing import assert_array_equal
 import pytest
 import rclpy
@@ -140,7 +140,7 @@ def test_bad_transport_or_codec_is_refused(context: Context) -> None:
 def test_demo_with_compressed_transport_corrects_the_jpeg_stream(tmp_path: Path) -> None:
     from test_demo import blurred_difference, CHANGE, demo_env, read_rgb
     result = subprocess.run(
-        [sys.executable, '-m', 'mechdeconv_ros.demo', '--seconds', '1', '--transport',
+        [sys.executable, '-m', 'mechdeconv_ros.tools.demo', '--seconds', '1', '--transport',
          'compressed', '--out', str(tmp_path)],
         cwd=REPO, env=demo_env(), stdin=subprocess.DEVNULL, capture_output=True, text=True,
         timeout=120)

@@ -13,12 +13,12 @@ from __future__ import annotations
 
 import math
 
-from mechdeconv_ros import datasheet as ds
-from mechdeconv_ros.cli import format_report
-from mechdeconv_ros.model import build_model, camera_info_yaml, ModelError
-from mechdeconv_ros.params import load_params_file
-from mechdeconv_ros.plots import plot_model
-from mechdeconv_ros.remap import Rectifier
+from mechdeconv_ros.imaging.remap import Rectifier
+from mechdeconv_ros.lenses import datasheet as ds
+from mechdeconv_ros.model.model import build_model, camera_info_yaml, ModelError
+from mechdeconv_ros.schema.params import load_params_file
+from mechdeconv_ros.tools.cli import format_report
+from mechdeconv_ros.tools.plots import plot_model
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest

@@ -1,7 +1,7 @@
 # Copyright 2026 The mechdeconv_ros Authors.
 # SPDX-License-Identifier: Apache-2.0
 """
-Tests of mechdeconv_ros.debayer: the ROS tile <-> OpenCV code table, methods, refusals, CLI.
+Tests of imaging.debayer: the ROS tile <-> OpenCV code table, methods, refusals, CLI.
 
 A mosaic is built from a known smooth RGB image by keeping, at each pixel, the channel the
 tile puts there; demosaicing it must give that RGB image back (to a few grey levels: the
@@ -14,11 +14,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import cv2
-from mechdeconv_ros.cli import main
-from mechdeconv_ros.debayer import _CODES, demosaic, Demosaicer, method_for, stripe_count
-from mechdeconv_ros.model import build_model
-from mechdeconv_ros.params import BAYER_PATTERNS, check_values, DEBAYER_METHODS, SPECS
-from mechdeconv_ros.remap import Rectifier
+from mechdeconv_ros.imaging.debayer import _CODES, demosaic, Demosaicer, method_for, stripe_count
+from mechdeconv_ros.imaging.remap import Rectifier
+from mechdeconv_ros.model.model import build_model
+from mechdeconv_ros.schema.params import BAYER_PATTERNS, check_values, DEBAYER_METHODS, SPECS
+from mechdeconv_ros.tools.cli import main
 import numpy as np
 import numpy.testing as npt
 import pytest

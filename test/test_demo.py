@@ -1,7 +1,7 @@
 # Copyright 2026 The mechdeconv_ros Authors.
 # SPDX-License-Identifier: Apache-2.0
 """
-End-to-end test of ``python -m mechdeconv_ros.demo`` (what ``make demo`` runs).
+End-to-end test of ``python -m mechdeconv_ros.tools.demo`` (what ``make demo`` runs).
 
 The demo starts the real ``correct_node`` and ``demo_camera`` processes. The pictures it saves
 are checked against the lens model: the corrected frame must show the camera's chart
@@ -25,12 +25,12 @@ import time
 from typing import Iterator
 
 import cv2
-from mechdeconv_ros.demo_camera import Chart, convert_rgb, DemoCamera
-from mechdeconv_ros.graph_env import pick_domain_id
-from mechdeconv_ros.image_msgs import image_to_array
-from mechdeconv_ros.model import build_model, LensModel
-from mechdeconv_ros.params import load_params_file
-from mechdeconv_ros.remap import Rectifier
+from mechdeconv_ros.imaging.remap import Rectifier
+from mechdeconv_ros.model.model import build_model, LensModel
+from mechdeconv_ros.node.image_msgs import image_to_array
+from mechdeconv_ros.node.process_env import pick_domain_id
+from mechdeconv_ros.schema.params import load_params_file
+from mechdeconv_ros.tools.demo_camera import Chart, convert_rgb, DemoCamera
 import numpy as np
 from numpy.testing import assert_array_equal
 import pytest
@@ -89,7 +89,7 @@ def demo_run(tmp_path_factory: pytest.TempPathFactory) -> DemoRun:
     out = tmp_path_factory.mktemp('demo_out')
     start = time.monotonic()
     result = subprocess.run(
-        [sys.executable, '-m', 'mechdeconv_ros.demo', '--seconds', '2', '--out', str(out)],
+        [sys.executable, '-m', 'mechdeconv_ros.tools.demo', '--seconds', '2', '--out', str(out)],
         cwd=REPO, env=demo_env(), stdin=subprocess.DEVNULL, capture_output=True, text=True,
         timeout=120)
     return result, out, time.monotonic() - start
@@ -150,7 +150,7 @@ def test_demo_with_the_fisheye_params_changes_the_first_air_gap_and_corrects_to_
         tmp_path: Path) -> None:
     """``--params config/fisheye.yaml``: a 1280x960 prescription, corrected to f-theta."""
     result = subprocess.run(
-        [sys.executable, '-m', 'mechdeconv_ros.demo', '--params', 'config/fisheye.yaml',
+        [sys.executable, '-m', 'mechdeconv_ros.tools.demo', '--params', 'config/fisheye.yaml',
          '--seconds', '2', '--out', str(tmp_path)],
         cwd=REPO, env=demo_env(), stdin=subprocess.DEVNULL, capture_output=True, text=True,
         timeout=120)
@@ -190,7 +190,7 @@ def test_demo_with_the_fisheye_params_changes_the_first_air_gap_and_corrects_to_
 @pytest.mark.ros
 def test_demo_interrupted_stops_its_processes(tmp_path: Path) -> None:
     proc = subprocess.Popen(
-        [sys.executable, '-m', 'mechdeconv_ros.demo', '--seconds', '20', '--out',
+        [sys.executable, '-m', 'mechdeconv_ros.tools.demo', '--seconds', '20', '--out',
          str(tmp_path)], cwd=REPO, env=demo_env(), stdin=subprocess.DEVNULL,
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
     lines: list[str] = []
@@ -329,8 +329,8 @@ def test_camera_takes_an_atomic_lens_change_and_refuses_impossible_ones(
 def test_camera_sweeps_a_moving_lens_and_renders_each_frame_at_its_state(
         context: Context, tmp_path: Path) -> None:
     """Issue 19: each frame comes with a lens_state of its stamp and is rendered at it."""
-    from mechdeconv_ros.moving_maps import render_grid
-    from mechdeconv_ros.params import to_params_yaml
+    from mechdeconv_ros.imaging.moving_maps import render_grid
+    from mechdeconv_ros.schema.params import to_params_yaml
     from sensor_msgs.msg import JointState
 
     values = dict(load_params_file(Path(__file__).resolve().parents[1] / 'config' /

@@ -1,7 +1,7 @@
 # Copyright 2026 The mechdeconv_ros Authors.
 # SPDX-License-Identifier: Apache-2.0
 """
-Tests of mechdeconv_ros.glass: catalog glasses, model glasses, and the refusals.
+Tests of mechdeconv_ros.optics.glass: catalog glasses, model glasses, and the refusals.
 
 References: the catalogs' own published nd/vd (the CSV's columns, from the entries' SPECS),
 SCHOTT's N-BK7 data sheet line indices, and optiland's material model
@@ -15,8 +15,8 @@ import json
 import math
 from pathlib import Path
 
-from mechdeconv_ros import glass
-from mechdeconv_ros.glass import GlassError, LINES_NM, lookup, refractive_index
+from mechdeconv_ros.optics import glass
+from mechdeconv_ros.optics.glass import GlassError, LINES_NM, lookup, refractive_index
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest

@@ -11,9 +11,10 @@ from __future__ import annotations
 
 import math
 
-from mechdeconv_ros import glass, optics
-from mechdeconv_ros.cli import format_report
-from mechdeconv_ros.model import build_model, ModelError
+from mechdeconv_ros.model.model import build_model, ModelError
+from mechdeconv_ros.optics import glass
+from mechdeconv_ros.optics import thick_lens
+from mechdeconv_ros.tools.cli import format_report
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest
@@ -29,7 +30,7 @@ PRESCRIPTION = {**SIZE, 'lens.surfaces.radius_mm': [10.0, -10.0, 0.0],
 
 def expected_fx(n: float, r1: float = 4.0, r2: float = -4.0, t: float = 3.0,
                 l_mm: float = 1000.0, pixel_um: float = 4.0625) -> float:
-    f = optics.thick_lens_focal_length(n, r1, r2, t)
+    f = thick_lens.thick_lens_focal_length(n, r1, r2, t)
     return f * l_mm / (l_mm - f) / (pixel_um * 1e-3)
 
 
@@ -68,7 +69,7 @@ def test_focal_length_with_glass_is_designed_at_the_d_line() -> None:
     r1 = at_d.prescription.surfaces[0].radius_mm
     assert_allclose(at_850.prescription.surfaces[0].radius_mm, r1, rtol=1e-14)
     n = glass.refractive_index('N-BK7', 850.0)
-    assert_allclose(at_850.focal_length_mm, optics.thick_lens_focal_length(n, r1, -r1, 3.0),
+    assert_allclose(at_850.focal_length_mm, thick_lens.thick_lens_focal_length(n, r1, -r1, 3.0),
                     rtol=1e-12)
     assert at_850.focal_length_mm > 6.0    # lower index in the infrared
 

@@ -15,11 +15,11 @@ import math
 from pathlib import Path
 
 from benchmarks import vignetting as vignetting_bench
-from mechdeconv_ros import illumination as il
-from mechdeconv_ros import raytrace as rt
-from mechdeconv_ros import trace3d
-from mechdeconv_ros.model import build_model
-from mechdeconv_ros.params import load_params_file
+from mechdeconv_ros.model.model import build_model
+from mechdeconv_ros.optics import illumination as il
+from mechdeconv_ros.optics import raytrace as rt
+from mechdeconv_ros.optics import trace3d
+from mechdeconv_ros.schema.params import load_params_file
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest

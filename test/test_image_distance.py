@@ -12,10 +12,10 @@ from __future__ import annotations
 
 import math
 
-from mechdeconv_ros.cli import format_report
-from mechdeconv_ros.model import build_model, ModelError
-from mechdeconv_ros.params import load_params_file
-from mechdeconv_ros.prescription import vertex_z
+from mechdeconv_ros.model.model import build_model, ModelError
+from mechdeconv_ros.optics.prescription import vertex_z
+from mechdeconv_ros.schema.params import load_params_file
+from mechdeconv_ros.tools.cli import format_report
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest

@@ -1,6 +1,6 @@
 # Copyright 2026 The mechdeconv_ros Authors.
 # SPDX-License-Identifier: Apache-2.0
-"""Tests of mechdeconv_ros.image_msgs: Image <-> numpy views, output buffers, CameraInfo."""
+"""Tests of mechdeconv_ros.node.image_msgs: Image <-> numpy views, output buffers, CameraInfo."""
 
 from __future__ import annotations
 
@@ -9,11 +9,11 @@ from types import SimpleNamespace
 from typing import Any
 
 import cv2
-from mechdeconv_ros import image_msgs
-from mechdeconv_ros.image_msgs import (
+from mechdeconv_ros.node import image_msgs
+from mechdeconv_ros.node.image_msgs import (
     camera_info_from_model, ENCODINGS, fill_camera_info, image_to_array, lookup_encoding,
     MalformedImageError, new_output_image, OutputImagePool, UnsupportedEncodingError)
-from mechdeconv_ros.params import MAX_SIDE_PX
+from mechdeconv_ros.schema.params import MAX_SIDE_PX
 import numpy as np
 import numpy.testing as npt
 import pytest

@@ -16,9 +16,9 @@ import importlib.util
 from pathlib import Path
 import signal
 
-from mechdeconv_ros.cli import main
-from mechdeconv_ros.model import build_model
-from mechdeconv_ros.params import load_params_file
+from mechdeconv_ros.model.model import build_model
+from mechdeconv_ros.schema.params import load_params_file
+from mechdeconv_ros.tools.cli import main
 import numpy as np
 import numpy.testing as npt
 import pytest
@@ -27,8 +27,8 @@ from ros_helpers import (
 from sensor_msgs.msg import CameraInfo, Image
 
 pytestmark = [pytest.mark.ros,
-              pytest.mark.skipif(importlib.util.find_spec('mechdeconv_ros.glass') is None,
-                                 reason='needs mechdeconv_ros.glass (branch glass)')]
+              pytest.mark.skipif(importlib.util.find_spec('mechdeconv_ros.optics.glass') is None,
+                                 reason='needs mechdeconv_ros.optics.glass (branch glass)')]
 
 ROOT = Path(__file__).resolve().parents[1]
 

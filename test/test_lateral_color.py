@@ -21,12 +21,13 @@ from pathlib import Path
 from typing import Any
 
 import cv2
-from mechdeconv_ros import channel_remap, lateral_color
-from mechdeconv_ros.channel_remap import ChannelRemap
-from mechdeconv_ros.cli import main
-from mechdeconv_ros.model import build_model, LensModel, ModelError
-from mechdeconv_ros.params import load_params_file, to_params_yaml
-from mechdeconv_ros.remap import Rectifier
+from mechdeconv_ros.imaging import channel_remap
+from mechdeconv_ros.imaging.channel_remap import ChannelRemap
+from mechdeconv_ros.imaging.remap import Rectifier
+from mechdeconv_ros.model import lateral_color
+from mechdeconv_ros.model.model import build_model, LensModel, ModelError
+from mechdeconv_ros.schema.params import load_params_file, to_params_yaml
+from mechdeconv_ros.tools.cli import main
 import numpy as np
 import numpy.testing as npt
 import pytest

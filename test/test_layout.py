@@ -1,7 +1,10 @@
 # Copyright 2026 The mechdeconv_ros Authors.
 # SPDX-License-Identifier: Apache-2.0
 """
-The layout: no import circles, no module over 800 lines, docs/design.md section 6 is true.
+The layout: layers, no import circles, no module over 800 lines, docs/design.md section 6 true.
+
+The package is split into subpackages that are layers (:data:`LAYERS`, bottom first): a module
+imports only modules of its own subpackage and of the subpackages below it.
 
 The imports are read from the source (AST), every ``import``/``from ... import`` of a
 ``mechdeconv_ros`` or ``benchmarks`` module, at module level or inside a function (a lazy
@@ -19,6 +22,8 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 PACKAGES = ('mechdeconv_ros', 'benchmarks')
 MAX_LINES = 800
+#: The subpackages of mechdeconv_ros, bottom layer first.
+LAYERS = ('schema', 'optics', 'lenses', 'model', 'imaging', 'node', 'tools')
 #: Circles that exist and are being removed elsewhere (none: the benchmarks' circle
 #: node_latency -> report -> node_latency / speed was removed on branch perf, issue 21).
 KNOWN_CIRCLES: set[frozenset[str]] = set()
@@ -28,10 +33,21 @@ def modules() -> dict[str, Path]:
     """Return every module of the two packages by dotted name."""
     out = {}
     for package in PACKAGES:
-        for path in sorted((REPO / package).glob('*.py')):
+        for path in sorted((REPO / package).rglob('*.py')):
             if path.stem != '__init__':
-                out[f'{package}.{path.stem}'] = path
+                parts = path.relative_to(REPO).with_suffix('').parts
+                out['.'.join(parts)] = path
     return out
+
+
+def layer_of(name: str) -> int:
+    """Return the layer index of a ``mechdeconv_ros.<subpackage>.<module>`` name."""
+    return LAYERS.index(name.split('.')[1])
+
+
+def short(name: str) -> str:
+    """Return ``subpackage/module`` of a dotted ``mechdeconv_ros`` module name."""
+    return '/'.join(name.split('.')[1:])
 
 
 def imports_of(path: Path, known: set[str]) -> set[str]:
@@ -104,8 +120,47 @@ def test_no_import_circles():
 def test_the_package_imports_what_the_layout_needs():
     """The graph is read from the real sources: model imports the seam, the seam no model."""
     graph = import_graph()
-    assert 'mechdeconv_ros.lens_source' in graph['mechdeconv_ros.model']
-    assert 'mechdeconv_ros.model' not in graph['mechdeconv_ros.lens_source']
+    assert 'mechdeconv_ros.lenses.lens_source' in graph['mechdeconv_ros.model.model']
+    assert 'mechdeconv_ros.model.model' not in graph['mechdeconv_ros.lenses.lens_source']
+
+
+def test_every_module_is_in_a_layer():
+    """No module sits in the package's top folder: each is in one of the layer subpackages."""
+    found = [n for n in modules() if n.startswith('mechdeconv_ros.')]
+    assert found
+    stray = [n for n in found if len(n.split('.')) != 3 or n.split('.')[1] not in LAYERS]
+    assert not stray, f'modules outside the layers {LAYERS}: {stray}'
+    folders = {p.name for p in (REPO / 'mechdeconv_ros').iterdir()
+               if p.is_dir() and (p / '__init__.py').exists()}
+    assert folders == set(LAYERS)
+
+
+@pytest.mark.parametrize('layer', LAYERS)
+def test_each_layer_says_what_it_holds(layer):
+    """Each subpackage's __init__ has a docstring saying what it holds and may import."""
+    doc = ast.get_docstring(ast.parse((REPO / 'mechdeconv_ros' / layer / '__init__.py')
+                                      .read_text()))
+    assert doc and 'import' in doc, f'{layer}/__init__.py says nothing of its imports'
+
+
+def upward_imports(graph: dict[str, set[str]]) -> list[tuple[str, str]]:
+    """Return (module, import) pairs where a package module imports a higher layer."""
+    return sorted((short(name), short(dep)) for name, deps in graph.items()
+                  if name.startswith('mechdeconv_ros.') for dep in deps
+                  if dep.startswith('mechdeconv_ros.') and layer_of(dep) > layer_of(name))
+
+
+def test_a_module_imports_only_its_layer_and_those_below():
+    """No upward import: a module's package imports are in its own layer or lower ones."""
+    upward = upward_imports(import_graph())
+    assert not upward, f'upward imports (module, import): {upward}'
+
+
+def test_the_layer_rule_finds_an_upward_import():
+    """The rule is not vacuous: optics importing the node is an upward import; the reverse not."""
+    graph = {'mechdeconv_ros.optics.a': {'mechdeconv_ros.node.b'},
+             'mechdeconv_ros.node.b': {'mechdeconv_ros.optics.a'}}
+    assert upward_imports(graph) == [('optics/a', 'node/b')]
 
 
 @pytest.mark.parametrize('name', sorted(n for n in modules() if n.startswith('mechdeconv_ros')))
@@ -127,15 +182,15 @@ def test_the_layout_section_lists_every_module_with_its_imports():
     """Section 6 has a row per package module whose imports are the package ones it has."""
     table = layout_table()
     graph = import_graph()
-    package = {name.split('.', 1)[1] for name in graph if name.startswith('mechdeconv_ros.')}
+    package = {name.split('.')[-1] for name in graph if name.startswith('mechdeconv_ros.')}
     for name in sorted(graph):
         if not name.startswith('mechdeconv_ros.'):
             continue
-        short = name.split('.', 1)[1]
-        assert f'{short}.py' in table, f'docs/design.md section 6 has no row for {short}.py'
-        listed = set(re.findall(r'\w+', table[f'{short}.py'])) & package
-        actual = {m.split('.', 1)[1] for m in graph[name]}
-        assert listed == actual, f'{short}.py: the layout says {sorted(listed)}, ' \
+        row = f'{short(name)}.py'
+        assert row in table, f'docs/design.md section 6 has no row for {row}'
+        listed = set(re.findall(r'\w+', table[row])) & package
+        actual = {m.split('.')[-1] for m in graph[name]}
+        assert listed == actual, f'{row}: the layout says {sorted(listed)}, ' \
                                  f'the source imports {sorted(actual)}'
 
 
@@ -147,8 +202,6 @@ def test_the_layout_rows_import_only_rows_above_them():
     for name in sorted(graph):
         if not name.startswith('mechdeconv_ros.'):
             continue
-        short = name.split('.', 1)[1]
-        above = set(order[:order.index(short)])
-        below = sorted(m.split('.', 1)[1] for m in graph[name]
-                       if m.split('.', 1)[1] not in above)
-        assert not below, f'{short}.py imports {below}, listed after it in section 6'
+        above = set(order[:order.index(short(name))])
+        below = sorted(short(m) for m in graph[name] if short(m) not in above)
+        assert not below, f'{short(name)}.py imports {below}, listed after it in section 6'

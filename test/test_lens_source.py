@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import math
 
-from mechdeconv_ros import lens_source as ls
-from mechdeconv_ros.cli import format_report
-from mechdeconv_ros.model import build_model
-from mechdeconv_ros.params import check_values
+from mechdeconv_ros.lenses import lens_source as ls
+from mechdeconv_ros.model.model import build_model
+from mechdeconv_ros.schema.params import check_values
+from mechdeconv_ros.tools.cli import format_report
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest

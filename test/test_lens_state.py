@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 
-from mechdeconv_ros.lens_state import KEEP_NS, LensStateHistory, MAX_SAMPLES
+from mechdeconv_ros.imaging.lens_state import KEEP_NS, LensStateHistory, MAX_SAMPLES
 import pytest
 
 MS = 1_000_000

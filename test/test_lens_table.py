@@ -6,8 +6,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from mechdeconv_ros import lens_table
-from mechdeconv_ros.params import check_values, load_params_file
+from mechdeconv_ros.lenses import lens_table
+from mechdeconv_ros.schema.params import check_values, load_params_file
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest
@@ -167,8 +167,8 @@ def test_probe_positions_are_rows_and_mid_rows(zoom_values):
 
 def test_model_of_a_moving_lens_and_a_refused_row(zoom_values):
     # The seam: a moving lens is a lens source at a state, checked at every reachable state.
-    from mechdeconv_ros.model import build_model, ModelError
-    from mechdeconv_ros.moving_source import MovingSource
+    from mechdeconv_ros.lenses.moving_source import MovingSource
+    from mechdeconv_ros.model.model import build_model, ModelError
 
     model = build_model(zoom_values, 320, 180)
     assert isinstance(model.source, MovingSource) and model.source.state == {'zoom': 0.0}
@@ -193,7 +193,7 @@ def test_zoom_cam_keeps_the_image_plane_and_spans_the_patent_range(zoom_values):
     """tools/make_zoom_config.py solved the compensator: the image plane never moves."""
     import math
 
-    from mechdeconv_ros.lens_source import PrescriptionSource
+    from mechdeconv_ros.lenses.lens_source import PrescriptionSource
 
     (zoom,) = lens_table.mechanisms(zoom_values)
     planes, focals = [], []

@@ -7,11 +7,11 @@ from __future__ import annotations
 import math
 
 import cv2
-from mechdeconv_ros.model import (
+from mechdeconv_ros.imaging.remap import build_float_maps, Rectifier
+from mechdeconv_ros.model.model import (
     build_model, camera_info_yaml, ModelError, radii_mean_error_percent)
-from mechdeconv_ros.optics import thick_lens_focal_length
-from mechdeconv_ros.raytrace import image_plane, trace_chief_rays
-from mechdeconv_ros.remap import build_float_maps, Rectifier
+from mechdeconv_ros.optics.raytrace import image_plane, trace_chief_rays
+from mechdeconv_ros.optics.thick_lens import thick_lens_focal_length
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest
@@ -119,7 +119,7 @@ def test_image_round_trip(case2):
 
 
 def _distortion(model):
-    from mechdeconv_ros.remap import distortion_maps
+    from mechdeconv_ros.imaging.remap import distortion_maps
     return distortion_maps(model)
 
 

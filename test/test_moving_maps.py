@@ -7,12 +7,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import cv2
-from mechdeconv_ros import lens_table
-from mechdeconv_ros.model import build_model
-from mechdeconv_ros.moving_maps import (
+from mechdeconv_ros.imaging.moving_maps import (
     build_moving_maps, grid_axis, lagrange_weights, node_positions)
-from mechdeconv_ros.params import check_values, load_params_file
-from mechdeconv_ros.remap import build_float_maps
+from mechdeconv_ros.imaging.remap import build_float_maps
+from mechdeconv_ros.lenses import lens_table
+from mechdeconv_ros.model.model import build_model
+from mechdeconv_ros.schema.params import check_values, load_params_file
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest

@@ -3,7 +3,7 @@
 """
 End-to-end tests of correct_node with real rclpy: the node runs as its own process.
 
-The node under test is started once per module (``python -m mechdeconv_ros.correct_node
+The node under test is started once per module (``python -m mechdeconv_ros.node.correct_node
 --ros-args --params-file config/case2.yaml -p ...``) in its own process group, on a
 pid-derived ROS_DOMAIN_ID, with discovery limited to localhost and the package's Fast DDS
 profile; it is always stopped by SIGINT to its PID and must exit with code 0. A client node in
@@ -26,10 +26,10 @@ from typing import Any, Iterator
 import xml.etree.ElementTree as ElementTree
 
 from diagnostic_msgs.msg import DiagnosticArray
-from mechdeconv_ros.image_msgs import image_to_array
-from mechdeconv_ros.model import build_model, LensModel
-from mechdeconv_ros.params import defaults, load_params_file, to_params_yaml
-from mechdeconv_ros.remap import Rectifier
+from mechdeconv_ros.imaging.remap import Rectifier
+from mechdeconv_ros.model.model import build_model, LensModel
+from mechdeconv_ros.node.image_msgs import image_to_array
+from mechdeconv_ros.schema.params import defaults, load_params_file, to_params_yaml
 import numpy as np
 import numpy.testing as npt
 import pytest

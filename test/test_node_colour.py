@@ -18,10 +18,10 @@ from __future__ import annotations
 import time
 from typing import Any, Iterator
 
-from mechdeconv_ros.debayer import demosaic
-from mechdeconv_ros.image_msgs import image_to_array
-from mechdeconv_ros.params import load_params_file
-from mechdeconv_ros.remap import Rectifier
+from mechdeconv_ros.imaging.debayer import demosaic
+from mechdeconv_ros.imaging.remap import Rectifier
+from mechdeconv_ros.node.image_msgs import image_to_array
+from mechdeconv_ros.schema.params import load_params_file
 import numpy as np
 import numpy.testing as npt
 import pytest

@@ -11,9 +11,10 @@ build_model and checked against the thick-lens closed form).
 
 from __future__ import annotations
 
-from mechdeconv_ros import glass, optics
-from mechdeconv_ros.image_msgs import image_to_array
-from mechdeconv_ros.remap import Rectifier
+from mechdeconv_ros.imaging.remap import Rectifier
+from mechdeconv_ros.node.image_msgs import image_to_array
+from mechdeconv_ros.optics import glass
+from mechdeconv_ros.optics import thick_lens
 import numpy as np
 import numpy.testing as npt
 import pytest
@@ -52,9 +53,9 @@ def test_wavelength_set_rebuilds_with_the_glass_index(
         # The published K is the thick lens's at N-BK7's index at 850 nm: f from eq. 8,
         # v = f l / (l - f), f_x = v / p_x.
         n = glass.refractive_index('N-BK7', 850.0)
-        f = optics.thick_lens_focal_length(n, harness.values['lens.r1_mm'],
-                                           harness.values['lens.r2_mm'],
-                                           harness.values['lens.thickness_mm'])
+        f = thick_lens.thick_lens_focal_length(n, harness.values['lens.r1_mm'],
+                                               harness.values['lens.r2_mm'],
+                                               harness.values['lens.thickness_mm'])
         distance = harness.values['scene.distance_mm']
         fx = f * distance / (distance - f) / (harness.values['sensor.pixel_size_x_um'] * 1e-3)
         npt.assert_allclose(got['info'].k[0], fx, rtol=1e-9)

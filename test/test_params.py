@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from mechdeconv_ros import params
+from mechdeconv_ros.schema import params
 import pytest
 import yaml
 

@@ -17,9 +17,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import cv2
-from mechdeconv_ros.model import build_model
-from mechdeconv_ros.params import load_params_file
-from mechdeconv_ros.plots import make_figure, plot_model
+from mechdeconv_ros.model.model import build_model
+from mechdeconv_ros.schema.params import load_params_file
+from mechdeconv_ros.tools.plots import make_figure, plot_model
 import numpy as np
 import pytest
 

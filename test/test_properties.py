@@ -19,9 +19,9 @@ import json
 import math
 
 from hypothesis import given, HealthCheck, settings, strategies as st
-from mechdeconv_ros.model import build_model, camera_info_yaml, ModelError
-from mechdeconv_ros.params import SPECS
-from mechdeconv_ros.remap import build_float_maps, Rectifier
+from mechdeconv_ros.imaging.remap import build_float_maps, Rectifier
+from mechdeconv_ros.model.model import build_model, camera_info_yaml, ModelError
+from mechdeconv_ros.schema.params import SPECS
 import numpy as np
 import pytest
 import yaml
@@ -328,7 +328,7 @@ def test_the_strategies_reach_the_accepted_space(kind):
 ], ids=['focus', 'edge', 'hemisphere', 'stop', 'circle'])
 def test_the_independent_checks_catch_what_the_model_refuses(monkeypatch, values, words):
     """With the model's own checks switched off, physical_violations finds each bad case."""
-    from mechdeconv_ros import refusals
+    from mechdeconv_ros.lenses import refusals
     monkeypatch.setattr(refusals, 'check_focus_distance', lambda *args: None)
     monkeypatch.setattr(refusals, 'check_surfaces', lambda *args: [])
     monkeypatch.setattr(refusals, 'check_circle_of_confusion', lambda *args: None)

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import math
 
-from mechdeconv_ros import optics
-from mechdeconv_ros import raytrace as rt
+from mechdeconv_ros.optics import raytrace as rt
+from mechdeconv_ros.optics import thick_lens
 import numpy as np
 from numpy.testing import assert_allclose, assert_array_equal
 import pytest
@@ -28,7 +28,7 @@ CORNER_MM = math.hypot(320 * 4.0625e-3, 240 * 4.4375e-3)
 
 
 def case2(stop_offset_mm: float = 0.2) -> rt.Prescription:
-    return optics.thick_lens(*CASE2_ARGS, stop_offset_mm)
+    return thick_lens.thick_lens(*CASE2_ARGS, stop_offset_mm)
 
 
 def with_stop(prescription: rt.Prescription, stop_z_mm: float) -> rt.Prescription:
@@ -90,9 +90,9 @@ def test_prescription_takes_a_list_and_vertex_z():
     pytest.param(N_BK7, 7.0, -11.0, 0.0, id='thin'),
 ])
 def test_paraxial_equals_thick_lens_closed_form(n, r1, r2, t):
-    par = rt.paraxial(optics.thick_lens(n, r1, r2, t, 0.0))
-    f = optics.thick_lens_focal_length(n, r1, r2, t)
-    z_h, z_h2 = optics.thick_lens_principal_planes(n, r1, r2, t)
+    par = rt.paraxial(thick_lens.thick_lens(n, r1, r2, t, 0.0))
+    f = thick_lens.thick_lens_focal_length(n, r1, r2, t)
+    z_h, z_h2 = thick_lens.thick_lens_principal_planes(n, r1, r2, t)
     assert_allclose(par.efl_mm, f, rtol=1e-13)
     assert_allclose([par.front_principal_z_mm, par.rear_principal_z_mm], [z_h, z_h2],
                     rtol=1e-12, atol=1e-14)
@@ -162,7 +162,7 @@ def test_image_plane_no_real_image(distance, message):
 
 def test_image_plane_diverging_lens():
     with pytest.raises(ValueError, match='diverging'):
-        rt.image_plane(optics.thick_lens(1.7, -8.0, 8.0, 1.0, 0.0), 1000.0)
+        rt.image_plane(thick_lens.thick_lens(1.7, -8.0, 8.0, 1.0, 0.0), 1000.0)
 
 
 # --- Snell's law and flat plates ---------------------------------------------------------------
@@ -333,7 +333,7 @@ def test_shape_and_nan_input():
 def test_object_behind_the_first_vertex_is_rejected():
     # A thick plano-convex rod: f = 4 mm but H lies 5.33 mm behind the front vertex, so a
     # scene 4.5 mm from H (a real image by the Gaussian formula) would sit inside the glass.
-    lens = optics.thick_lens(1.5, 0.0, -2.0, 8.0, 0.0)
+    lens = thick_lens.thick_lens(1.5, 0.0, -2.0, 8.0, 0.0)
     sensor_z, _ = rt.image_plane(lens, 4.5)
     with pytest.raises(ValueError, match='not in front of the first surface'):
         rt.trace_chief_rays(lens, 4.5, sensor_z, [0.1])
@@ -355,7 +355,7 @@ def test_semi_diameter_clips_to_nan():
 
 
 def test_aperture_diameter_does_not_clip():
-    lens = optics.thick_lens(*CASE2_ARGS, 0.2, aperture_diameter_mm=0.01)
+    lens = thick_lens.thick_lens(*CASE2_ARGS, 0.2, aperture_diameter_mm=0.01)
     sensor_z, _, tan = fields(lens, 1000.0)
     assert_array_equal(rt.trace_chief_rays(lens, 1000.0, sensor_z, tan),
                        rt.trace_chief_rays(case2(), 1000.0, sensor_z, tan))

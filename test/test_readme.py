@@ -4,8 +4,8 @@
 The README stays true: its parameters table is the schema's, its commands exist, configs load.
 
 The table between ``<!-- params:start -->`` and ``<!-- params:end -->`` must equal what
-``tools/gen_readme_params.py`` generates from :data:`mechdeconv_ros.params.SCHEMA`, and so must
-docs/parameters.md (run that tool after changing the schema). Every ``config/*.yaml`` must
+``tools/gen_readme_params.py`` generates from :data:`mechdeconv_ros.schema.params.SCHEMA`, and so
+must docs/parameters.md (run that tool after changing the schema). Every ``config/*.yaml`` must
 load through the same loader the CLI uses, and the paper's case files must build a lens model.
 """
 
@@ -16,8 +16,8 @@ from pathlib import Path
 import re
 from types import ModuleType
 
-from mechdeconv_ros.model import build_model
-from mechdeconv_ros.params import load_params_file, SCHEMA
+from mechdeconv_ros.model.model import build_model
+from mechdeconv_ros.schema.params import load_params_file, SCHEMA
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]

@@ -32,9 +32,9 @@ import json
 import math
 from pathlib import Path
 
-from mechdeconv_ros.optics import thick_lens
-from mechdeconv_ros.raytrace import image_plane, paraxial, Prescription, Surface
-from mechdeconv_ros.raytrace import trace_chief_rays
+from mechdeconv_ros.optics.raytrace import image_plane, paraxial, Prescription, Surface
+from mechdeconv_ros.optics.raytrace import trace_chief_rays
+from mechdeconv_ros.optics.thick_lens import thick_lens
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest

@@ -37,9 +37,10 @@ import math
 from pathlib import Path
 from typing import Any
 
-from mechdeconv_ros import params, raytrace
-from mechdeconv_ros.model import make_prescription
-from mechdeconv_ros.raytrace import image_plane, paraxial, Prescription
+from mechdeconv_ros.model.model import make_prescription
+from mechdeconv_ros.optics import raytrace
+from mechdeconv_ros.optics.raytrace import image_plane, paraxial, Prescription
+from mechdeconv_ros.schema import params
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import math
 
-from mechdeconv_ros.model import build_model, ModelError
-from mechdeconv_ros.optics import thick_lens_focal_length, thick_lens_principal_planes
+from mechdeconv_ros.model.model import build_model, ModelError
+from mechdeconv_ros.optics.thick_lens import thick_lens_focal_length, thick_lens_principal_planes
 import pytest
 
 CASE2 = {'sensor.width_px': 640, 'sensor.height_px': 480}
@@ -136,7 +136,7 @@ def test_semi_diameter_wider_than_the_sphere_is_refused():
 
 def test_cooke_triplet_stop_is_at_its_limit():
     """The triplet: its stop (surface 3) is as wide as the semi-diameter optiland gave it."""
-    from mechdeconv_ros.params import load_params_file
+    from mechdeconv_ros.schema.params import load_params_file
     from pathlib import Path
     values = load_params_file(Path(__file__).parents[1] / 'config' / 'cooke_triplet.yaml')
     build_model(values)
@@ -238,7 +238,7 @@ def test_fast_aperture_warns():
 
 
 def test_existing_configs_build_without_refusal():
-    from mechdeconv_ros.params import load_params_file
+    from mechdeconv_ros.schema.params import load_params_file
     from pathlib import Path
     paths = sorted((Path(__file__).parents[1] / 'config').glob('*.yaml'))
     assert paths
@@ -250,8 +250,8 @@ def test_rim_and_sag_of_conics_and_aspheres():
     """The rim and sag helpers read conic and asphere terms when a surface has them."""
     from types import SimpleNamespace
 
-    from mechdeconv_ros.refusals import _sag
-    from mechdeconv_ros.surfaces import domain_limit_mm as _rim_mm
+    from mechdeconv_ros.lenses.refusals import _sag
+    from mechdeconv_ros.optics.surfaces import domain_limit_mm as _rim_mm
 
     def surface(radius, conic=0.0, asphere=()):
         return SimpleNamespace(radius_mm=radius, curvature_per_mm=1.0 / radius if radius else 0.0,

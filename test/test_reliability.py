@@ -34,12 +34,12 @@ import time
 from typing import Any, Callable, Iterator
 
 from diagnostic_msgs.msg import DiagnosticArray
-from mechdeconv_ros.correct_node import MAX_SURFACES
-from mechdeconv_ros.image_msgs import image_to_array
-from mechdeconv_ros.model import build_model, LensModel
-from mechdeconv_ros.params import (
+from mechdeconv_ros.imaging.remap import Rectifier
+from mechdeconv_ros.model.model import build_model, LensModel
+from mechdeconv_ros.node.correct_node import MAX_SURFACES
+from mechdeconv_ros.node.image_msgs import image_to_array
+from mechdeconv_ros.schema.params import (
     load_params_file, MAX_FRAME_PIXELS, MAX_SIDE_PX, SCHEMA, SPECS, to_params_yaml)
-from mechdeconv_ros.remap import Rectifier
 import numpy as np
 import numpy.testing as npt
 import psutil
@@ -1359,7 +1359,7 @@ def test_rebuild_thread_is_a_daemon_and_ends_with_the_node() -> None:
     import cv2
     import rclpy
     from rclpy.context import Context
-    from mechdeconv_ros.correct_node import CorrectNode
+    from mechdeconv_ros.node.correct_node import CorrectNode
 
     threads = cv2.getNumThreads()
     context = Context()
@@ -1380,8 +1380,8 @@ def test_diagnostics_status_is_named_after_the_fully_qualified_node_name() -> No
     import cv2
     import rclpy
     from rclpy.context import Context
-    from mechdeconv_ros.correct_node import CorrectNode
-    from mechdeconv_ros.diagnostics import status_name
+    from mechdeconv_ros.node.correct_node import CorrectNode
+    from mechdeconv_ros.node.diagnostics import status_name
 
     threads = cv2.getNumThreads()
     context = Context()

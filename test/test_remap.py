@@ -5,8 +5,8 @@
 from __future__ import annotations
 
 import cv2
-from mechdeconv_ros.model import build_model
-from mechdeconv_ros.remap import build_float_maps, distort_image, Rectifier
+from mechdeconv_ros.imaging.remap import build_float_maps, distort_image, Rectifier
+from mechdeconv_ros.model.model import build_model
 import numpy as np
 from numpy.testing import assert_allclose, assert_array_equal
 import pytest

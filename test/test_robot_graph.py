@@ -26,11 +26,11 @@ import time
 from typing import Any, Iterator
 
 from diagnostic_msgs.msg import DiagnosticArray
-from mechdeconv_ros.compressed import decode, encode
-from mechdeconv_ros.image_msgs import image_to_array
-from mechdeconv_ros.model import build_model, LensModel
-from mechdeconv_ros.params import load_params_file
-from mechdeconv_ros.remap import Rectifier
+from mechdeconv_ros.imaging.remap import Rectifier
+from mechdeconv_ros.model.model import build_model, LensModel
+from mechdeconv_ros.node.compressed import decode, encode
+from mechdeconv_ros.node.image_msgs import image_to_array
+from mechdeconv_ros.schema.params import load_params_file
 import numpy as np
 import numpy.testing as npt
 import pytest

@@ -14,10 +14,10 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from mechdeconv_ros import raytrace as rt
-from mechdeconv_ros import surfaces as sf
-from mechdeconv_ros.model import build_model, make_prescription, ModelError
-from mechdeconv_ros.params import defaults, load_params_file
+from mechdeconv_ros.model.model import build_model, make_prescription, ModelError
+from mechdeconv_ros.optics import raytrace as rt
+from mechdeconv_ros.optics import surfaces as sf
+from mechdeconv_ros.schema.params import defaults, load_params_file
 import numpy as np
 from numpy.testing import assert_allclose, assert_array_equal
 import pytest

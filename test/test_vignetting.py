@@ -14,11 +14,11 @@ import math
 from pathlib import Path
 
 import cv2
-from mechdeconv_ros import illumination as il
-from mechdeconv_ros.cli import main
-from mechdeconv_ros.model import build_model, ModelError
-from mechdeconv_ros.params import check_values, load_params_file
-from mechdeconv_ros.remap import build_gain_map, Rectifier
+from mechdeconv_ros.imaging.remap import build_gain_map, Rectifier
+from mechdeconv_ros.model.model import build_model, ModelError
+from mechdeconv_ros.optics import illumination as il
+from mechdeconv_ros.schema.params import check_values, load_params_file
+from mechdeconv_ros.tools.cli import main
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest

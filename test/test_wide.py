@@ -17,11 +17,11 @@ import math
 from pathlib import Path
 
 import cv2
-from mechdeconv_ros import raytrace as rt
-from mechdeconv_ros.model import (
+from mechdeconv_ros.imaging.remap import build_float_maps, Rectifier
+from mechdeconv_ros.model.model import (
     build_model, EQUIVALENT_MAX_ERROR_PX, LensModel, make_prescription, ModelError)
-from mechdeconv_ros.params import defaults, load_params_file
-from mechdeconv_ros.remap import build_float_maps, Rectifier
+from mechdeconv_ros.optics import raytrace as rt
+from mechdeconv_ros.schema.params import defaults, load_params_file
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest

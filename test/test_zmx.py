@@ -16,17 +16,17 @@ from pathlib import Path
 
 from hypothesis import given, HealthCheck, settings
 from hypothesis import strategies as st
-from mechdeconv_ros.cli import main
-from mechdeconv_ros.lens_import import import_zmx, Medium, zmx_values
-from mechdeconv_ros.optics import thick_lens
-from mechdeconv_ros.raytrace import paraxial
-from mechdeconv_ros.zmx import decode, LensImportError, parse
+from mechdeconv_ros.lenses.lens_import import import_zmx, Medium, zmx_values
+from mechdeconv_ros.lenses.zmx import decode, LensImportError, parse
+from mechdeconv_ros.optics.raytrace import paraxial
+from mechdeconv_ros.optics.thick_lens import thick_lens
+from mechdeconv_ros.tools.cli import main
 from numpy.testing import assert_allclose
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 FILES = ROOT / 'test' / 'data' / 'zmx'
-HAVE_GLASS = importlib.util.find_spec('mechdeconv_ros.glass') is not None
+HAVE_GLASS = importlib.util.find_spec('mechdeconv_ros.optics.glass') is not None
 
 #: A biconvex singlet, f ~ 50 mm, object 1 m from the first vertex, in a real file's layout.
 SINGLET = """VERS 190513 80 123457 L123457
@@ -165,7 +165,7 @@ def test_pickup_glass_and_a_dummy_surface():
 
 
 def test_the_written_file_names_its_source_and_the_missing_sensor():
-    from mechdeconv_ros.lens_import import params_text
+    from mechdeconv_ros.lenses.lens_import import params_text
     text = params_text(imported(SINGLET))
     assert 'lens.zmx ("test singlet")' in text and 'add sensor.pixel_size_x_um' in text
     assert text.count('/**:') == 1 and 'ros__parameters:' in text
@@ -248,7 +248,7 @@ def test_cli_refusal_exits_2_and_writes_nothing(tmp_path, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == ['cut.zmx', 'lens.yaml']
 
 
-@pytest.mark.skipif(not HAVE_GLASS, reason='needs mechdeconv_ros.glass (branch glass)')
+@pytest.mark.skipif(not HAVE_GLASS, reason='needs mechdeconv_ros.optics.glass (branch glass)')
 def test_unknown_glass_without_nd_vd_is_refused_by_name():
     text = SINGLET.replace('GLAS N-BK7 0 0 1.5168 64.17 0 0 0 0 0 0',
                            'GLAS UNOBTAINIUM-7 0 0 1.5 40 0 0 0 0 0 0')
@@ -258,7 +258,7 @@ def test_unknown_glass_without_nd_vd_is_refused_by_name():
     text = text.replace('1.5 40 0', '1.6 45 0')
     result = zmx_values(parse(text, 'g.zmx'))
     assert any('UNOBTAINIUM-7' in w and 'MODEL:1.6:45' in w for w in result.warnings)
-    from mechdeconv_ros.glass import model_glass_index
+    from mechdeconv_ros.optics.glass import model_glass_index
     assert result.values['lens.surfaces.refractive_index'][0] == \
         model_glass_index(1.6, 45.0, 587.56)
     plain = zmx_values(parse(SINGLET, 'g.zmx'))
@@ -297,8 +297,8 @@ def test_fuzz_flips_and_truncations_refuse_cleanly(cut, flips):
 
 def test_real_file_with_a_finite_object():
     """US 5,831,776: object 110.86 mm before the first vertex -> scene.distance_mm from H."""
-    from mechdeconv_ros.model import make_prescription
-    from mechdeconv_ros.params import check_values
+    from mechdeconv_ros.model.model import make_prescription
+    from mechdeconv_ros.schema.params import check_values
 
     # (The file's 248 nm is outside lens.wavelength_nm's range: the geometry needs none.)
     values = import_zmx(FILES / 'US05831776-1.zmx', 550.0, resolve=fixed_index).values

@@ -24,12 +24,12 @@ import json
 import math
 from pathlib import Path
 
-from mechdeconv_ros.lens_import import import_zmx, Medium
-from mechdeconv_ros.model import build_model
-from mechdeconv_ros.params import check_values
-from mechdeconv_ros.raytrace import paraxial, Prescription, Surface, trace_field_angles
-from mechdeconv_ros.raytrace import vertex_z
-from mechdeconv_ros.zmx import LensImportError
+from mechdeconv_ros.lenses.lens_import import import_zmx, Medium
+from mechdeconv_ros.lenses.zmx import LensImportError
+from mechdeconv_ros.model.model import build_model
+from mechdeconv_ros.optics.raytrace import paraxial, Prescription, Surface, trace_field_angles
+from mechdeconv_ros.optics.raytrace import vertex_z
+from mechdeconv_ros.schema.params import check_values
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest
@@ -37,7 +37,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 DATA = json.loads((ROOT / 'test' / 'data' / 'zmx_reference.json').read_text())
 LENSES = DATA['lenses']
-HAVE_GLASS = importlib.util.find_spec('mechdeconv_ros.glass') is not None
+HAVE_GLASS = importlib.util.find_spec('mechdeconv_ros.optics.glass') is not None
 #: Files our glass data cannot import as they stand (the geometry test above still runs).
 REFUSED = {
     # Schott B 270 is in no bundled catalog and the file's GLAS line carries 1.5 / 40
@@ -126,7 +126,7 @@ def test_an_asphere_and_a_utf16_file_are_among_them():
     assert aspheric >= 2 and utf16 >= 2 and vendor >= 2
 
 
-@pytest.mark.skipif(not HAVE_GLASS, reason='needs mechdeconv_ros.glass (branch glass)')
+@pytest.mark.skipif(not HAVE_GLASS, reason='needs mechdeconv_ros.optics.glass (branch glass)')
 @pytest.mark.parametrize('key', sorted(LENSES), ids=sorted(LENSES))
 def test_glass_indices_match_optiland(key):
     """Catalog glasses: our index agrees with optiland's; the whole import traces alike."""

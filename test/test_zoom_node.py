@@ -20,10 +20,10 @@ from typing import Any, Iterator
 
 import cv2
 from diagnostic_msgs.msg import DiagnosticArray
-from mechdeconv_ros import lens_table
-from mechdeconv_ros.model import build_model
-from mechdeconv_ros.moving_maps import build_moving_maps
-from mechdeconv_ros.params import load_params_file, to_params_yaml
+from mechdeconv_ros.imaging.moving_maps import build_moving_maps
+from mechdeconv_ros.lenses import lens_table
+from mechdeconv_ros.model.model import build_model
+from mechdeconv_ros.schema.params import load_params_file, to_params_yaml
 import numpy as np
 import numpy.testing as npt
 import pytest

@@ -1,7 +1,7 @@
 # Copyright 2026 The mechdeconv_ros Authors.
 # SPDX-License-Identifier: Apache-2.0
 """
-Regenerate the parameters tables from the schema (mechdeconv_ros.params.SCHEMA).
+Regenerate the parameters tables from the schema (mechdeconv_ros.schema.params.SCHEMA).
 
 README.md holds one row per parameter with the first clause of its description, between the
 lines ``<!-- params:start -->`` and ``<!-- params:end -->`` (the rest of the README is left
@@ -24,7 +24,7 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
-from mechdeconv_ros.params import (  # noqa: E402 - after the sys.path fix
+from mechdeconv_ros.schema.params import (  # noqa: E402 - after the sys.path fix
     ASPHERE_POWERS, ParamSpec, SCHEMA)
 
 START = '<!-- params:start -->'
@@ -200,8 +200,8 @@ def parameters_page() -> str:
     :return: the page's text.
     """
     return ('# Parameters of correct_node\n\n'
-            '<!-- Generated from mechdeconv_ros/params.py by python tools/gen_readme_params.py: '
-            'do not edit. -->\n'
+            '<!-- Generated from mechdeconv_ros/schema/params.py by '
+            'python tools/gen_readme_params.py: do not edit. -->\n'
             'Every parameter with its whole description, as `ros2 param describe` shows it '
             "(the README lists the first clause). Defaults are the paper's Case 2.\n\n"
             + params_table(full=True) + '\n')

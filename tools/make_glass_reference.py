@@ -52,7 +52,7 @@ def main(argv: list[str] | None = None) -> int:
     from optiland.materials import AbbeMaterial, Material
     from optiland.materials.material_file import MaterialFile
     sys.path.insert(0, str(REPO))
-    from mechdeconv_ros.glass import lookup
+    from mechdeconv_ros.optics.glass import lookup
     glasses = []
     for catalog, name in GLASSES:
         ours = lookup(f'{catalog}:{name}')

@@ -34,9 +34,9 @@ import argparse
 import math
 from pathlib import Path
 
-from mechdeconv_ros.model import make_prescription
-from mechdeconv_ros.params import check_values
-from mechdeconv_ros.raytrace import image_plane
+from mechdeconv_ros.model.model import make_prescription
+from mechdeconv_ros.optics.raytrace import image_plane
+from mechdeconv_ros.schema.params import check_values
 
 # radius, thickness (short focal length), index (d), semi-diameter; 0 = flat (the iris).
 PATENT = (

@@ -1,0 +1,102 @@
+# Copyright 2026 The mechdeconv_ros Authors.
+# SPDX-License-Identifier: Apache-2.0
+"""
+Run one node until SIGINT/SIGTERM and exit 0; exit 1 on invalid start-up parameters.
+
+SIGINT and SIGTERM only set a flag that the spin loop checks between callbacks (at least every
+:data:`STOP_POLL_S`): rclpy's own handler raises KeyboardInterrupt wherever the interpreter
+is, and while a received image is converted to Python rclpy turns that into a RuntimeError,
+so Ctrl-C (or ``ros2 launch`` stopping the node) ended with a traceback and exit code 1. A
+second SIGINT is ignored: Ctrl-C on ``ros2 launch`` reaches the node from the terminal and
+launch forwards one more (always with ``--noninteractive``), which used to interrupt the
+shutdown (exit code -2). Should shutdown hang, a third SIGINT, or a SIGTERM after the first
+signal (launch sends one after its timeout), stops the process the default way. The signal
+path touches nothing but the flag: the main thread then destroys the node.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+import threading
+from typing import Any, Callable
+
+from mechdeconv_ros.node.process_env import keep_large_buffers
+import rclpy
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+
+#: Longest wait of the spin loop before it looks at the stop flag, s.
+STOP_POLL_S = 0.1
+
+
+def run_node(factory: Callable[[], Node], name: str, args: list[str] | None = None) -> None:
+    """
+    Create a node, spin it in a SingleThreadedExecutor until a stop signal, destroy it.
+
+    :param factory: makes the node (after ``rclpy.init``); a ValueError means invalid
+        start-up parameters: logged as fatal, exit code 1.
+    :param name: the logger name for that message.
+    :param args: command-line arguments for rclpy (``--ros-args ...``); default ``sys.argv``.
+    """
+    keep_large_buffers()
+    stop = threading.Event()
+
+    def request_stop(signum: int, frame: Any) -> None:
+        stop.set()
+        signal.signal(signal.SIGINT, ignore_once)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+    def ignore_once(signum: int, frame: Any) -> None:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    previous = {}
+    if threading.current_thread() is threading.main_thread():
+        previous = {sig: signal.signal(sig, request_stop)
+                    for sig in (signal.SIGINT, signal.SIGTERM)}
+    node: Node | None = None
+    failed = False
+    try:
+        node = factory()
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        while not stop.is_set() and executor.context.ok():
+            executor.spin_once(timeout_sec=STOP_POLL_S)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except ValueError as err:           # invalid start-up parameters (incl. ModelError)
+        rclpy.logging.get_logger(name).fatal(str(err))
+        failed = True
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    if failed:
+        sys.exit(1)
+
+
+def log_function(node: Node) -> Callable[[str, str], None]:
+    """
+    Return ``log(level, message)`` on a node's logger (``'info'``, ``'warning'``, ``'error'``).
+
+    One call site per level: rclpy refuses a second severity from the same line ("Logger
+    severity cannot be changed between calls"), which a single ``getattr(logger, level)``
+    call would hit on the first warning after an info, in the thread that logs it.
+
+    :param node: the node.
+    :return: the function.
+    """
+    logger = node.get_logger()
+
+    def log(level: str, message: str) -> None:
+        if level == 'error':
+            logger.error(message)
+        elif level == 'warning':
+            logger.warning(message)
+        else:
+            logger.info(message)
+    return log
