@@ -265,7 +265,7 @@ def zoom_scenario(args: argparse.Namespace, children: list[Child], monitor: Any,
     """Tell the moving lens's story (issue 19): the camera sweeps, each frame corrected."""
     import numpy as np
 
-    from mechdeconv_ros.lenses.moving_source import MovingSource
+    from mechdeconv_ros.lenses.sources import source_for
     from mechdeconv_ros.model.model import build_model
     from mechdeconv_ros.tools.cli import format_report
     from mechdeconv_ros.tools.demo_report import caption
@@ -300,7 +300,7 @@ def zoom_scenario(args: argparse.Namespace, children: list[Child], monitor: Any,
         if rect is None:        # its correction did not arrive (best effort): the newest
             rect = newest_rect(monitor)
         at = build_model(model.values, model.width, model.height,
-                         source=MovingSource(model.source.table_values, state))
+                         source=source_for(model.source.table_values, state))
         text = ', '.join(f'{k} = {v:.3f}' for k, v in state.items())
         frames.append((to_bgr(raw), to_bgr(rect),
                        f'{text}, f = {at.focal_length_mm:.1f} mm, max displacement '
