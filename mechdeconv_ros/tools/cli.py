@@ -346,7 +346,8 @@ def cmd_vignetting(args: argparse.Namespace) -> int:
 
 def cmd_import(args: argparse.Namespace) -> int:
     """Import a .zmx lens file or a datasheet CSV table into a params file."""
-    from mechdeconv_ros.lenses.lens_import import import_zmx, params_text, write_atomically
+    from mechdeconv_ros.lenses.lens_import import import_zmx
+    from mechdeconv_ros.lenses.params_file import params_text, write_atomically
     from mechdeconv_ros.lenses.zmx import LensImportError
 
     source = Path(args.lens)
