@@ -11,8 +11,10 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import math
 from pathlib import Path
 
+from mechdeconv_ros.lenses.datasheet import make_table
 from mechdeconv_ros.lenses.datasheet_csv import read_table, table_values
 from mechdeconv_ros.lenses.zmx import LensImportError
 from mechdeconv_ros.schema.params import load_params_file, SPECS
@@ -156,3 +158,22 @@ def test_wavelength_outside_the_range_is_refused(tmp_path, capsys):
     status, _, err = run(capsys, 'import', ZMX / 'US05831776-1.zmx', '-o', out)
     assert status == 2 and "248 nm (the file's primary wavelength)" in err
     assert not out.exists()
+
+
+@pytest.mark.parametrize('angles, heights', [
+    # Rectilinear, f = 4 mm, starting off axis: h = f tan(theta) from 5 deg.
+    ([5, 10, 20, 30], [4.0 * math.tan(math.radians(a)) for a in (5, 10, 20, 30)]),
+    # Rectilinear from the axis with a coarse first step (h / theta is 7.7 % above f).
+    ([0, 25, 40], [4.0 * math.tan(math.radians(a)) for a in (0, 25, 40)]),
+    # Off axis, and twice the focal length given: both must warn.
+    ([5, 10, 20], [8.0 * math.tan(math.radians(a)) for a in (5, 10, 20)]),
+], ids=['rectilinear-off-axis', 'rectilinear-coarse', 'wrong-f-off-axis'])
+def test_csv_import_and_model_give_one_focal_length_verdict(tmp_path, angles, heights) -> None:
+    # Issue 29: the CSV import checked h/theta of a table starting at 0 only, the model
+    # min(h/theta, h/tan theta) from any start: they disagreed on rectilinear tables.
+    path = tmp_path / 'table.csv'
+    path.write_text('\n'.join(f'{a}, {h!r}' for a, h in zip(angles, heights)) + '\n')
+    imported = table_values(path, 4.0)
+    model_warnings = make_table(imported.values).warnings
+    assert imported.warnings == list(model_warnings)
+    assert bool(imported.warnings) == (heights[-1] > 2 * 4.0 * math.tan(math.radians(angles[-1])) - 1e-9)
