@@ -5,7 +5,8 @@ launch/correct.launch.py starts the node in its namespace and Ctrl-C ends it cle
 
 Runs only where ``launch_ros`` is importable (a ROS install, or the ros2 venv of the
 development machine); the PyPI route of requirements.txt has no launch packages, so there the
-tests skip and say so.
+tests skip and say so. The file's content (arguments, node, parameters) is checked everywhere,
+without launch_ros, by test_launch_file.py.
 
 The launch file is run by ``launch.LaunchService`` (what ``ros2 launch`` calls) in a child
 process of its own process group, from an ament prefix made in the test's temporary directory:
