@@ -26,7 +26,7 @@ mechanisms, not of the joints); a mechanism missing from it sits at its first ro
 Refused, naming the parameter (:class:`TableError`, a ``ValueError`` whose text is
 ``<parameter>: <reason>``, as the model's refusals): a table whose length is not n x k, fewer
 than 2 or not strictly increasing positions, a gap index out of range, on a glass thickness
-(the medium after surface i is not air), the last entry (the image distance, which the model
+(the medium after surface i is not air, by its index or by its ``lens.surfaces.glass`` name), the last entry (the image distance, which the model
 computes) or moved by both mechanisms, and a moving joint without a prescription. Every
 reachable lens (every row, and half-way between consecutive rows, of each mechanism, and their
 combinations) must pass the model's physical rules: :func:`check_reachable` runs a given check
@@ -115,6 +115,7 @@ def mechanisms(values: Mapping[str, Any]) -> tuple[Mechanism, ...]:
                              '(lens.surfaces.*): the thick lens has no air gaps')
         thickness = list(values['lens.surfaces.thickness_mm'])
         index = list(values['lens.surfaces.refractive_index'])
+        glass = [str(g).strip() for g in values.get('lens.surfaces.glass', []) or []]
         positions = np.asarray(values.get(f'{prefix}.positions', []), dtype=np.float64)
         surfaces = [int(i) for i in values.get(f'{prefix}.surfaces', [])]
         table = np.asarray(values.get(f'{prefix}.thickness_mm', []), dtype=np.float64)
@@ -152,6 +153,11 @@ def mechanisms(values: Mapping[str, Any]) -> tuple[Mechanism, ...]:
                 raise TableError(f'{prefix}.surfaces',
                                  f'{i} is a glass thickness (lens.surfaces.refractive_index[{i}]'
                                  f' = {float(index[i]):g}): only air gaps move')
+            # A glass name sets the medium whatever the index array says ('' / AIR: air).
+            if i < len(glass) and glass[i] and glass[i].upper() != 'AIR':
+                raise TableError(f'{prefix}.surfaces',
+                                 f'{i} is a glass thickness (lens.surfaces.glass[{i}] = '
+                                 f'{glass[i]}): only air gaps move')
             if i in moved:
                 raise TableError(f'{prefix}.surfaces',
                                  f'gap {i} is moved by lens.{moved[i]}.surfaces already: a gap '
