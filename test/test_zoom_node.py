@@ -123,6 +123,20 @@ def _exact(values: dict, p: float):
     return build_model(lens_table.values_at(values, {'zoom': p}), W, H)
 
 
+def test_before_any_state_a_frame_gets_the_first_row_and_a_warning(running) -> None:
+    # Runs first (file order): no lens_state has been published yet.
+    client, values, proc = running
+    msg = make_image(np.zeros((H, W), np.uint8), 'mono8')
+    result = client.frame(msg, 99, 0)
+    npt.assert_allclose(result['info'].k, _exact(values, 0.0).K.ravel(), rtol=1e-6)
+    joint = values['lens.zoom.joint']
+    assert client.client.spin_until(
+        lambda: f"no lens_state of joint '{joint}' yet" in proc.output(), 5.0), \
+        proc.output()[-2000:]
+    assert client.client.spin_until(lambda: int(client.diagnostics_entries().get(
+        'lens_state_missing_frames', '0')) >= 1, 5.0), client.diagnostics_entries()
+
+
 def test_each_frame_gets_the_model_of_its_stamp(running) -> None:
     client, values, proc = running
     rng = np.random.default_rng(0)

@@ -26,8 +26,9 @@ mechanisms, not of the joints); a mechanism missing from it sits at its first ro
 Refused, naming the parameter (:class:`TableError`, a ``ValueError`` whose text is
 ``<parameter>: <reason>``, as the model's refusals): a table whose length is not n x k, fewer
 than 2 or not strictly increasing positions, a gap index out of range, on a glass thickness
-(the medium after surface i is not air, by its index or by its ``lens.surfaces.glass`` name), the last entry (the image distance, which the model
-computes) or moved by both mechanisms, and a moving joint without a prescription. Every
+(the medium after surface i is not air, by its index or by its ``lens.surfaces.glass``
+name), the last entry (the image distance, which the model computes) or moved by both
+mechanisms, and a moving joint without a prescription. Every
 reachable lens (every row, and half-way between consecutive rows, of each mechanism, and their
 combinations) must pass the model's physical rules: :func:`check_reachable` runs a given check
 on each and names the row of a refusal. No ROS, no model import: the check is injected.

@@ -15,7 +15,9 @@ CameraInfos with that state's K, D and P. ``/diagnostics`` gets ``lens_state.<me
 position a frame was last corrected with), ``lens_state_lag_ms`` (frame stamp minus the newest
 state's; > 0: the frame is newer than every state), ``lens_states_received``,
 ``lens_states_ignored`` (no followed joint, or NaN) and ``lens_states_last_ignored``,
-``lens_state_clamped_frames`` and the grid's size (``lens_grid_states``, ``lens_grid_memory_mb``).
+``lens_state_clamped_frames``, ``lens_state_missing_frames`` (frames corrected at a table's
+first row because its joint has sent no state yet, warned, throttled) and the grid's size
+(``lens_grid_states``, ``lens_grid_memory_mb``).
 
 Time: a JointState stamped 0 is placed at its ARRIVAL, rmw's received timestamp (the message
 info of :meth:`_on_joint_state` and of a drained take), carried onto the node's clock (sim time
@@ -93,6 +95,8 @@ class LensFollower:
         self._infos = (CameraInfo(), CameraInfo())
         self._warned_at = -CLAMP_WARN_S
         self.clamped_frames = 0
+        self._missing_warned_at = -CLAMP_WARN_S
+        self.missing_frames = 0
         self.failed = 0
         self.last_failure = ''
         # tf2's buffer clears on any jump back of its clock; so does the history.
@@ -196,10 +200,21 @@ class LensFollower:
         stamp = header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
         positions: dict[str, float] = {}
         lag_ms = float('nan')
+        missing: tuple[str, ...] = ()
         if self.history is not None:
             at = self.history.at(stamp)
-            positions, lag_ms = at.positions, at.lag_s * 1e3
+            positions, lag_ms, missing = at.positions, at.lag_s * 1e3, at.missing
         state, clamped = rectifier.grid.clamp(positions)
+        if missing:
+            # No JointState of that joint yet: the table's first row, said out loud.
+            self.missing_frames += 1
+            now = time.monotonic()
+            if now - self._missing_warned_at >= CLAMP_WARN_S:
+                self._missing_warned_at = now
+                self._warn(', '.join(
+                    f'lens.{m}: no lens_state of joint {self.history.joints[m]!r} yet; '
+                    f'correcting at lens.{m}.positions[0] = {state[m]:g}' for m in missing
+                    if m in state) + f' ({self.missing_frames} frames so far)')
         if clamped:
             self.clamped_frames += 1
             now = time.monotonic()
@@ -240,6 +255,7 @@ class LensFollower:
                 extra[f'lens_state.{mech}'] = position
             extra['lens_state_lag_ms'] = frame['lag_ms']
             extra['lens_state_clamped_frames'] = self.clamped_frames
+            extra['lens_state_missing_frames'] = self.missing_frames
             grid = frame['grid']
             extra['lens_grid_states'] = len(grid.cameras)
             extra['lens_grid_memory_mb'] = round(
