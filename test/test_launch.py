@@ -203,3 +203,22 @@ def test_launch_arguments_reach_the_node_and_a_second_sigint_is_harmless(
     assert seconds < STOP_BUDGET_S, f'{seconds:.1f} s to stop:\n{log[-3000:]}'
     assert re.search(rf'process has finished cleanly \[pid {pid}\]', log), log[-3000:]
     assert 'Traceback' not in log, log[-3000:]
+
+
+def test_the_real_launch_description_declares_what_the_content_test_checks(
+        prefix: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """launch itself reads the arguments test_launch_file.py checks by parsing the file."""
+    import importlib.util
+
+    from mechdeconv_ros.schema.params import IMAGE_TRANSPORTS
+
+    monkeypatch.setenv('AMENT_PREFIX_PATH', str(prefix))
+    path = prefix / 'share' / PACKAGE / 'launch' / 'correct.launch.py'
+    spec = importlib.util.spec_from_file_location('correct_launch', path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    arguments = {a.name: a for a in module.generate_launch_description().get_launch_arguments()}
+    assert sorted(arguments) == ['image_transport', 'namespace', 'params_file',
+                                 'use_fastdds_profile']
+    assert list(arguments['image_transport'].choices) == list(IMAGE_TRANSPORTS)
+    assert list(arguments['use_fastdds_profile'].choices) == ['true', 'false']
