@@ -39,6 +39,7 @@ from typing import Any, Sequence
 from benchmarks.common import log, RESULTS
 from benchmarks.node_latency import (
     _run_window, CASE2_YAML, paced_publish, Probe, READY_TIMEOUT_S, start_child)
+from benchmarks.report import machine_info
 from mechdeconv_ros.node.process_env import graph_env, pick_domain_id
 
 SIZES = ((1280, 720), (1920, 1080))
@@ -160,8 +161,8 @@ def run(out_dir: Path = RESULTS, quick: bool = False, seconds: float = WINDOW_S)
     import tempfile
 
     sizes = QUICK_SIZES if quick else SIZES
-    doc: dict[str, Any] = {'rate_hz': RATE_HZ, 'jpeg_quality': JPEG_QUALITY,
-                           'window_s': seconds, 'rows': []}
+    doc: dict[str, Any] = {'machine': machine_info(), 'rate_hz': RATE_HZ,
+                           'jpeg_quality': JPEG_QUALITY, 'window_s': seconds, 'rows': []}
     with tempfile.TemporaryDirectory(prefix='mechdeconv_compressed_') as tmp:
         salt = 0
         for width, height in sizes:

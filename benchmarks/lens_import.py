@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.common import bench_main, interleave, log, RESULTS, Variant
-from benchmarks.report import write_json
+from benchmarks.report import machine_info, write_json
 from mechdeconv_ros.lenses.lens_import import import_zmx, Medium
 from mechdeconv_ros.lenses.lens_params import make_prescription
 from mechdeconv_ros.lenses.zmx import LensImportError
@@ -111,7 +111,8 @@ def run(out_dir: Path = RESULTS, quick: bool = False) -> dict[str, Any]:
         if 'model' in timings:
             row['model_ms'] = timings['model'].median
         results[key] = row
-    doc = {'size': list(SIZE), 'rounds': rounds, 'reps': reps, 'lenses': results}
+    doc = {'machine': machine_info(), 'size': list(SIZE), 'rounds': rounds, 'reps': reps,
+           'lenses': results}
     write_json(out_dir / 'lens_import.json', doc)
     return doc
 

@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.common import bench_main, interleave, log, RESULTS
-from benchmarks.report import write_json
+from benchmarks.report import machine_info, write_json
 from mechdeconv_ros.imaging.remap import Rectifier
 from mechdeconv_ros.model.model import build_model
 from mechdeconv_ros.schema.params import defaults, load_params_file
@@ -136,7 +136,8 @@ def run(out_dir: Path = RESULTS, quick: bool = False) -> dict[str, Any]:
         base = (f'{kind} case2' if kind in ('rebuild', 'model')
                 else ' '.join(name.split()[:2]) + ' case2')
         summary['ratio_to_case2'] = summary['median_ms'] / results[base]['median_ms']
-    doc = {'size': list(SIZE), 'threads': THREADS, 'rounds': rounds, 'reps': reps,
+    doc = {'machine': machine_info(), 'size': list(SIZE), 'threads': THREADS, 'rounds': rounds,
+           'reps': reps,
            'others_cores': others,
            'reference_rebuild_ms': reference, 'target_ms': REBUILD_TARGET_MS,
            'results': results}

@@ -9,22 +9,20 @@ says the sensor is missing; a refusal exits 2 with one line on stderr and writes
 
 from __future__ import annotations
 
-import importlib.util
 import json
+import math
 from pathlib import Path
 
+from mechdeconv_ros.lenses.datasheet import make_table
 from mechdeconv_ros.lenses.datasheet_csv import read_table, table_values
 from mechdeconv_ros.lenses.zmx import LensImportError
-from mechdeconv_ros.schema.params import load_params_file, SPECS
+from mechdeconv_ros.schema.params import load_params_file
 from mechdeconv_ros.tools.cli import main
 from numpy.testing import assert_allclose
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 ZMX = ROOT / 'test' / 'data' / 'zmx'
-HAVE_GLASS = importlib.util.find_spec('mechdeconv_ros.optics.glass') is not None
-HAVE_DATASHEET = 'lens.datasheet.field_angle_deg' in SPECS
-needs_glass = pytest.mark.skipif(not HAVE_GLASS, reason='needs mechdeconv_ros.optics.glass')
 
 TABLE = """field angle (deg), real image height (mm)
 0, 0
@@ -96,7 +94,6 @@ def test_csv_cli_refusal_writes_nothing(tmp_path, capsys):
     assert status == 2 and not out.exists()
 
 
-@pytest.mark.skipif(not HAVE_DATASHEET, reason='needs datasheet mode (branch glass)')
 def test_csv_cli_writes_datasheet_params_that_load(tmp_path, capsys):
     path = tmp_path / 'm12.csv'
     path.write_text(TABLE)
@@ -111,7 +108,6 @@ def test_csv_cli_writes_datasheet_params_that_load(tmp_path, capsys):
     assert status == 0, err
 
 
-@needs_glass
 def test_zmx_import_writes_a_params_file_that_info_loads(tmp_path, capsys):
     out = tmp_path / 'lens.yaml'
     status, _, err = run(capsys, 'import', ZMX / 'edmund_55278.zmx', '-o', out)
@@ -123,9 +119,8 @@ def test_zmx_import_writes_a_params_file_that_info_loads(tmp_path, capsys):
     assert 'add sensor.pixel_size_x_um' in text
     values = load_params_file(out)
     assert values['lens.stop_surface'] == 0 and len(values['lens.surfaces.radius_mm']) == 6
-    if 'lens.wavelength_nm' in SPECS:
-        assert values['lens.wavelength_nm'] == pytest.approx(587.6)
-        assert values['lens.image_distance_mm'] == pytest.approx(43.707716717029655)
+    assert values['lens.wavelength_nm'] == pytest.approx(587.6)
+    assert values['lens.image_distance_mm'] == pytest.approx(43.707716717029655)
     status, report, err = run(capsys, 'info', '--params', out, '--width', 1920, '--height',
                               1200, '-p', 'sensor.pixel_size_x_um=5.86', '-p',
                               'sensor.pixel_size_y_um=5.86', '--json')
@@ -134,7 +129,6 @@ def test_zmx_import_writes_a_params_file_that_info_loads(tmp_path, capsys):
     assert_allclose(json.loads(report)['focal_length_mm'], 52.24355673278863, rtol=3e-5)
 
 
-@needs_glass
 def test_zmx_import_at_another_wavelength(tmp_path, capsys):
     """--wavelength-nm: every index at 850 nm, lower than at the d-line (normal dispersion)."""
     d_line, near_ir = tmp_path / 'd.yaml', tmp_path / 'ir.yaml'
@@ -147,7 +141,6 @@ def test_zmx_import_at_another_wavelength(tmp_path, capsys):
         assert (a == b == 1.0) or 0.0 < a - b < 0.03
 
 
-@needs_glass
 def test_wavelength_outside_the_range_is_refused(tmp_path, capsys):
     out = tmp_path / 'lens.yaml'
     status, _, err = run(capsys, 'import', ZMX / 'edmund_55278.zmx', '-o', out,
@@ -156,3 +149,23 @@ def test_wavelength_outside_the_range_is_refused(tmp_path, capsys):
     status, _, err = run(capsys, 'import', ZMX / 'US05831776-1.zmx', '-o', out)
     assert status == 2 and "248 nm (the file's primary wavelength)" in err
     assert not out.exists()
+
+
+@pytest.mark.parametrize('angles, heights', [
+    # Rectilinear, f = 4 mm, starting off axis: h = f tan(theta) from 5 deg.
+    ([5, 10, 20, 30], [4.0 * math.tan(math.radians(a)) for a in (5, 10, 20, 30)]),
+    # Rectilinear from the axis with a coarse first step (h / theta is 7.7 % above f).
+    ([0, 25, 40], [4.0 * math.tan(math.radians(a)) for a in (0, 25, 40)]),
+    # Off axis, and twice the focal length given: both must warn.
+    ([5, 10, 20], [8.0 * math.tan(math.radians(a)) for a in (5, 10, 20)]),
+], ids=['rectilinear-off-axis', 'rectilinear-coarse', 'wrong-f-off-axis'])
+def test_csv_import_and_model_give_one_focal_length_verdict(tmp_path, angles, heights) -> None:
+    # Issue 29: the CSV import checked h/theta of a table starting at 0 only, the model
+    # min(h/theta, h/tan theta) from any start: they disagreed on rectilinear tables.
+    path = tmp_path / 'table.csv'
+    path.write_text('\n'.join(f'{a}, {h!r}' for a, h in zip(angles, heights)) + '\n')
+    imported = table_values(path, 4.0)
+    model_warnings = make_table(imported.values).warnings
+    assert imported.warnings == list(model_warnings)
+    doubled = heights[-1] > 2 * 4.0 * math.tan(math.radians(angles[-1])) - 1e-9
+    assert bool(imported.warnings) == doubled

@@ -143,6 +143,10 @@ def test_relative_illumination_from_the_table_drives_the_gain_map(m12: dict) -> 
 
 
 def test_finite_scene_scales_the_table_by_v_over_f() -> None:
+    # A REGRESSION PIN of the model's stated approximation: a datasheet table is at infinity,
+    # and at a finite distance its heights are scaled by v/f (the distortion's change with
+    # the conjugate is not in a datasheet). The independent check is the distortion-free
+    # limit below, where v/f is exact.
     values = {'sensor.width_px': 640, 'sensor.height_px': 480,
               **ds.table_params([0.0, 10.0, 20.0, 30.0], [0.0, 1.0, 2.02, 3.08], 5.7),
               'scene.distance_mm': 500.0}
@@ -151,6 +155,23 @@ def test_finite_scene_scales_the_table_by_v_over_f() -> None:
     assert_allclose(model.image_distance_mm, v, rtol=1e-12)
     heights, _ = model.source.real_heights(np.radians([10.0, 20.0]), 500.0)
     assert_allclose(heights, np.array([1.0, 2.02]) * v / 5.7, rtol=1e-12)
+
+
+def test_a_distortion_free_table_at_a_finite_distance_is_the_thin_lens_image() -> None:
+    # Independent of the code: an ideal thin lens of focal length f, the pupil at the lens,
+    # images an object point seen at field angle theta from distance s at height v tan(theta),
+    # v = f s / (s - f) (the chief ray through the lens centre is undeviated).
+    f, s = 5.7, 500.0
+    angles = [0.0, 10.0, 20.0, 30.0]
+    table = ds.table_params(angles, [f * math.tan(math.radians(a)) for a in angles], f)
+    model = build_model({'sensor.width_px': 640, 'sensor.height_px': 480, **table,
+                         'scene.distance_mm': s})
+    theta = np.radians([5.0, 10.0, 20.0, 30.0])
+    heights, _ = model.source.real_heights(theta, s)
+    v = f * s / (s - f)
+    assert_allclose(heights[1:], v * np.tan(theta[1:]), rtol=1e-12)
+    # Between the table's points the interpolant, not the formula: within its error.
+    assert_allclose(heights[0], v * math.tan(theta[0]), rtol=1e-3)
 
 
 def test_interpolant_is_exact_at_the_points_with_slope_f_at_the_axis() -> None:

@@ -12,7 +12,6 @@ parameters read back as written, and its ``camera_info`` for a frame carries the
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 import signal
 
@@ -26,9 +25,7 @@ from ros_helpers import (
     BEST_EFFORT, make_image, next_domain_id, node_command, NodeProcess, ros_env, RosClient)
 from sensor_msgs.msg import CameraInfo, Image
 
-pytestmark = [pytest.mark.ros,
-              pytest.mark.skipif(importlib.util.find_spec('mechdeconv_ros.optics.glass') is None,
-                                 reason='needs mechdeconv_ros.optics.glass (branch glass)')]
+pytestmark = pytest.mark.ros
 
 ROOT = Path(__file__).resolve().parents[1]
 

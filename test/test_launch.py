@@ -5,7 +5,8 @@ launch/correct.launch.py starts the node in its namespace and Ctrl-C ends it cle
 
 Runs only where ``launch_ros`` is importable (a ROS install, or the ros2 venv of the
 development machine); the PyPI route of requirements.txt has no launch packages, so there the
-tests skip and say so.
+tests skip and say so. The file's content (arguments, node, parameters) is checked everywhere,
+without launch_ros, by test_launch_file.py.
 
 The launch file is run by ``launch.LaunchService`` (what ``ros2 launch`` calls) in a child
 process of its own process group, from an ament prefix made in the test's temporary directory:
@@ -202,3 +203,22 @@ def test_launch_arguments_reach_the_node_and_a_second_sigint_is_harmless(
     assert seconds < STOP_BUDGET_S, f'{seconds:.1f} s to stop:\n{log[-3000:]}'
     assert re.search(rf'process has finished cleanly \[pid {pid}\]', log), log[-3000:]
     assert 'Traceback' not in log, log[-3000:]
+
+
+def test_the_real_launch_description_declares_what_the_content_test_checks(
+        prefix: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """launch itself reads the arguments test_launch_file.py checks by parsing the file."""
+    import importlib.util
+
+    from mechdeconv_ros.schema.params import IMAGE_TRANSPORTS
+
+    monkeypatch.setenv('AMENT_PREFIX_PATH', str(prefix))
+    path = prefix / 'share' / PACKAGE / 'launch' / 'correct.launch.py'
+    spec = importlib.util.spec_from_file_location('correct_launch', path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    arguments = {a.name: a for a in module.generate_launch_description().get_launch_arguments()}
+    assert sorted(arguments) == ['image_transport', 'namespace', 'params_file',
+                                 'use_fastdds_profile']
+    assert list(arguments['image_transport'].choices) == list(IMAGE_TRANSPORTS)
+    assert list(arguments['use_fastdds_profile'].choices) == ['true', 'false']

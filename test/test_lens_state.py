@@ -94,3 +94,37 @@ def test_old_states_are_dropped():
     # A long pause keeps the last two states.
     history.add(10 ** 13, ['z'], [5.0])
     assert len(joint.stamps) == 2
+
+
+def test_a_state_long_before_the_newest_is_a_jump_back_and_clears_the_history():
+    # A bag played in a loop: the stamps start again 60 s earlier. Pruning on insert would
+    # drop every new sample and keep the stale "future" ones newest.
+    history = LensStateHistory({'zoom': 'z', 'focus': 'f'})
+    history.add(60_000 * MS, ['z', 'f'], [1.0, 3.0])
+    history.add(60_100 * MS, ['z'], [0.9])
+    history.add(100 * MS, ['z'], [0.2])
+    assert history.time_jumps == 1 and 'before the newest' in history.last_jump
+    state = history.at(150 * MS)
+    assert state.positions == {'zoom': 0.2} and state.missing == ('focus',)
+    history.add(200 * MS, ['z'], [0.4])
+    assert history.at(150 * MS).positions['zoom'] == pytest.approx(0.3)
+    # A late message within KEEP_NS is not a jump: it is sorted in.
+    history.add(200 * MS - KEEP_NS + MS, ['z'], [0.0])
+    assert history.time_jumps == 1
+
+
+def test_a_clock_jump_back_clears_only_a_history_from_the_future():
+    history = LensStateHistory({'zoom': 'z'})
+    history.add(5_000 * MS, ['z'], [1.0])
+    assert not history.time_jumped_back(5_000 * MS)     # nothing newer than the clock
+    assert history.time_jumped_back(1_000 * MS)
+    assert history.time_jumps == 1 and history.newest() == {}
+    assert 'clock went back' in history.last_jump
+
+
+def test_an_unstamped_frame_gets_the_newest_state():
+    history = LensStateHistory({'zoom': 'z'})
+    history.add(100 * MS, ['z'], [0.0])
+    history.add(1_900 * MS, ['z'], [1.0])
+    state = history.at(0)
+    assert state.positions == {'zoom': 1.0} and math.isnan(state.lag_s)

@@ -206,3 +206,21 @@ def test_zoom_cam_keeps_the_image_plane_and_spans_the_patent_range(zoom_values):
     # The patent's 2.5x: f = 57.2 to 143.0 mm as tabulated; its long row to 0.03 mm.
     assert focals[-1] / focals[0] == pytest.approx(2.5, abs=0.01)
     assert_allclose(zoom.rows[-1], [48.678, 1.536, 5.133], atol=0.03)
+
+
+def test_a_gap_named_glass_does_not_move_whatever_the_index_array_says(zoom_values):
+    # Issue 29, the same read: lens.surfaces.glass sets the medium after a surface (the index
+    # array is then not used), so a gap with a glass name is a glass thickness.
+    values = dict(zoom_values)
+    count = len(values['lens.surfaces.thickness_mm'])
+    gap = values['lens.zoom.surfaces'][0]
+    assert values['lens.surfaces.refractive_index'][gap] == 1.0
+    glass = [''] * count
+    glass[gap] = 'N-BK7'
+    values['lens.surfaces.glass'] = glass
+    with pytest.raises(lens_table.TableError) as err:
+        lens_table.mechanisms(check_values(values))
+    assert err.value.parameter == 'lens.zoom.surfaces'
+    assert f'lens.surfaces.glass[{gap}] = N-BK7' in str(err.value)
+    glass[gap] = 'AIR'
+    assert lens_table.mechanisms(check_values(values))

@@ -121,3 +121,22 @@ def test_grid_axis_refines_each_interval():
                                 np.zeros((3, 1)))
     assert_allclose(grid_axis(mech, 2), [0.0, 0.5, 1.0, 2.0, 3.0])
     assert_allclose(grid_axis(mech, 1), [0.0, 1.0, 3.0])
+
+
+def test_a_moving_lens_reuses_two_map_buffers(lens):
+    # Issue 29: a new lens state wrote a new full-size map (17 MB at 1080p) per frame while
+    # the lens moved. Two buffers alternate: the previous frame's map stays valid while the
+    # next is written.
+    _, _, grid = lens
+    positions = (0.01, 0.04, 0.07, 0.1, 0.11)
+    maps = []
+    for p in positions:
+        _, full = grid.at({'zoom': p})
+        maps.append((full, full.copy()))
+    for k, (full, _) in enumerate(maps[2:], start=2):
+        assert np.shares_memory(full, maps[k - 2][0])
+        assert not np.shares_memory(full, maps[k - 1][0])
+    # The previous map is intact, the newest is the state's own map.
+    np.testing.assert_array_equal(maps[-2][0], maps[-2][1])
+    fresh = grid.full_map(grid.camera_at({'zoom': positions[-1]}))
+    np.testing.assert_array_equal(maps[-1][0], fresh)

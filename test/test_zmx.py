@@ -10,7 +10,6 @@ exception.
 
 from __future__ import annotations
 
-import importlib.util
 import math
 from pathlib import Path
 
@@ -26,7 +25,6 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 FILES = ROOT / 'test' / 'data' / 'zmx'
-HAVE_GLASS = importlib.util.find_spec('mechdeconv_ros.optics.glass') is not None
 
 #: A biconvex singlet, f ~ 50 mm, object 1 m from the first vertex, in a real file's layout.
 SINGLET = """VERS 190513 80 123457 L123457
@@ -248,7 +246,6 @@ def test_cli_refusal_exits_2_and_writes_nothing(tmp_path, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == ['cut.zmx', 'lens.yaml']
 
 
-@pytest.mark.skipif(not HAVE_GLASS, reason='needs mechdeconv_ros.optics.glass (branch glass)')
 def test_unknown_glass_without_nd_vd_is_refused_by_name():
     text = SINGLET.replace('GLAS N-BK7 0 0 1.5168 64.17 0 0 0 0 0 0',
                            'GLAS UNOBTAINIUM-7 0 0 1.5 40 0 0 0 0 0 0')
@@ -285,7 +282,7 @@ def test_fuzz_flips_and_truncations_refuse_cleanly(cut, flips):
     data = bytes(data[:cut] if cut < len(REAL) // 2 or not flips else data)
     try:
         lens = parse(decode(data, 'fuzz.zmx'), 'fuzz.zmx')
-        result = zmx_values(lens) if HAVE_GLASS else zmx_values(lens, resolve=fixed_index)
+        result = zmx_values(lens)
     except LensImportError as err:
         assert str(err).startswith('fuzz.zmx')
         return

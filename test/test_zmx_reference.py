@@ -19,7 +19,6 @@ stop centre, heights on the file's image surface). Asserted (issue 18, item 6):
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import math
 from pathlib import Path
@@ -37,7 +36,6 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 DATA = json.loads((ROOT / 'test' / 'data' / 'zmx_reference.json').read_text())
 LENSES = DATA['lenses']
-HAVE_GLASS = importlib.util.find_spec('mechdeconv_ros.optics.glass') is not None
 #: Files our glass data cannot import as they stand (the geometry test above still runs).
 REFUSED = {
     # Schott B 270 is in no bundled catalog and the file's GLAS line carries 1.5 / 40
@@ -46,6 +44,12 @@ REFUSED = {
     # D-ZK3M (LightPath) is a model glass here, and 1550 nm is beyond the model's range.
     'thorlabs_354710-C': 'outside the valid range',
 }
+#: Lenses whose every index agrees with optiland's to 1e-7, so the whole import (our glass) is
+#: traced against optiland. The others, and why: edmund_55278's SF5 differs by 1e-5 (two
+#: transcriptions of Schott's catalog: the 2e-5 check above holds), US08427765-1's L-TIM28 is
+#: not in optiland's database (it puts a 1.5 placeholder there). The test asserts this list, so
+#: a lens that stops agreeing, or starts to, is seen.
+WHOLE_IMPORT_TRACED = {'US00583336-2-scaled'}
 
 
 def optiland_indices(ref: dict):
@@ -126,7 +130,6 @@ def test_an_asphere_and_a_utf16_file_are_among_them():
     assert aspheric >= 2 and utf16 >= 2 and vendor >= 2
 
 
-@pytest.mark.skipif(not HAVE_GLASS, reason='needs mechdeconv_ros.optics.glass (branch glass)')
 @pytest.mark.parametrize('key', sorted(LENSES), ids=sorted(LENSES))
 def test_glass_indices_match_optiland(key):
     """Catalog glasses: our index agrees with optiland's; the whole import traces alike."""
@@ -144,5 +147,7 @@ def test_glass_indices_match_optiland(key):
     for i, (a, b, same) in enumerate(zip(ours, theirs, catalog)):
         if same and not glass[i].startswith('MODEL:'):
             assert abs(a - b) <= 2e-5, f'{key}: surface {i} ({glass[i]}): {a} vs {b}'
-    if all(abs(a - b) <= 1e-7 for a, b in zip(ours, theirs)):
+    agree = all(abs(a - b) <= 1e-7 for a, b in zip(ours, theirs))
+    assert agree == (key in WHOLE_IMPORT_TRACED), f'{key}: indices agree to 1e-7: {agree}'
+    if agree:
         compare(key, imported.values)

@@ -8,7 +8,9 @@ The lens is config/zoom.yaml's first three zoom rows on a small sensor of the sa
 (sensor_msgs/JointState) and frames with chosen stamps and checks that each frame's
 CameraInfos carry the model of the state AT ITS STAMP (interpolated between the two states
 around it, the newest for a newer frame), that image_rect is that state's correction, and
-that ignored states are counted in /diagnostics.
+that ignored states are counted in /diagnostics. The node runs on sim time (``use_sim_time``,
+the client publishes ``/clock``): one start-up serves every test, in file order, and the last
+ones send the clock back (a bag loop, a simulator restart) and an unstamped frame.
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ import pytest
 from ros_helpers import (
     BEST_EFFORT, make_image, next_domain_id, node_command, REPO, RosClient, running_node,
     stamp_of)
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image, JointState
 
 pytestmark = pytest.mark.ros
@@ -57,6 +60,10 @@ class Client:
         self.client = client
         self.frames = node.create_publisher(Image, 'image_raw', BEST_EFFORT)
         self.states = node.create_publisher(JointState, 'lens_state', 10)
+        # Sim time ticks in wall time (the node's timers, /diagnostics, run on it) from 100 s.
+        self.clock = node.create_publisher(Clock, '/clock', 10)
+        self.sim_ns = 100 * 1_000_000_000
+        node.create_timer(0.05, self._tick)
         self.by_stamp: dict[tuple[int, int], dict[str, Any]] = {}
         self.diagnostics: list[Any] = []
         node.create_subscription(DiagnosticArray, '/diagnostics', self.diagnostics.append, 10)
@@ -75,6 +82,22 @@ class Client:
         msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
         self.states.publish(msg)
 
+    def _tick(self) -> None:
+        self.sim_ns += 50_000_000
+        msg = Clock()
+        msg.clock.sec, msg.clock.nanosec = divmod(self.sim_ns, 1_000_000_000)
+        self.clock.publish(msg)
+
+    def set_clock(self, sec: int) -> None:
+        self.sim_ns = sec * 1_000_000_000
+        self._tick()
+        self.client.spin_for(0.3)
+
+    def diagnostics_entries(self) -> dict[str, str]:
+        if not self.diagnostics:
+            return {}
+        return {kv.key: kv.value for kv in self.diagnostics[-1].status[0].values}
+
     def frame(self, msg: Image, sec: int, nanosec: int, timeout: float = 8.0) -> dict[str, Any]:
         msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
         stamp = (sec, nanosec)
@@ -91,12 +114,27 @@ def running(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Client, 
     tmp = tmp_path_factory.mktemp('zoom_node')
     path, values = small_zoom(tmp)
     domain = next_domain_id()
-    with running_node(node_command(path), domain, tmp, answer_timeout=60.0) as (proc, client):
+    with running_node(node_command(path, 'use_sim_time:=true'), domain, tmp,
+                      answer_timeout=60.0) as (proc, client):
         yield Client(client), values, proc
 
 
 def _exact(values: dict, p: float):
     return build_model(lens_table.values_at(values, {'zoom': p}), W, H)
+
+
+def test_before_any_state_a_frame_gets_the_first_row_and_a_warning(running) -> None:
+    # Runs first (file order): no lens_state has been published yet.
+    client, values, proc = running
+    msg = make_image(np.zeros((H, W), np.uint8), 'mono8')
+    result = client.frame(msg, 99, 0)
+    npt.assert_allclose(result['info'].k, _exact(values, 0.0).K.ravel(), rtol=1e-6)
+    joint = values['lens.zoom.joint']
+    assert client.client.spin_until(
+        lambda: f"no lens_state of joint '{joint}' yet" in proc.output(), 5.0), \
+        proc.output()[-2000:]
+    assert client.client.spin_until(lambda: int(client.diagnostics_entries().get(
+        'lens_state_missing_frames', '0')) >= 1, 5.0), client.diagnostics_entries()
 
 
 def test_each_frame_gets_the_model_of_its_stamp(running) -> None:
@@ -161,3 +199,32 @@ def test_a_state_outside_the_table_is_clamped_and_warned(running) -> None:
     npt.assert_allclose(result['info'].k, _exact(values, 0.125).K.ravel(), rtol=1e-6)
     assert client.client.spin_until(
         lambda: 'is outside lens.zoom.positions' in proc.output(), 5.0), proc.output()[-2000:]
+
+
+def test_a_clock_jump_back_clears_the_history(running) -> None:
+    # A simulator restart: /clock and the joint stamps start again from 10 s. Pruned on
+    # insert, the new state would leave the old (zoom 0.125 at 200 s) newest.
+    client, values, proc = running
+    client.set_clock(200)
+    client.state(200, 0, ['zoom'], [0.125])
+    client.client.spin_for(0.3)
+    client.set_clock(10)
+    client.state(10, 0, ['zoom'], [0.0])
+    client.client.spin_for(0.3)
+    msg = make_image(np.zeros((H, W), np.uint8), 'mono8')
+    result = client.frame(msg, 10, 0)
+    npt.assert_allclose(result['info'].k, _exact(values, 0.0).K.ravel(), rtol=1e-6)
+    assert client.client.spin_until(
+        lambda: client.diagnostics_entries().get('lens_state_time_jumps') == '1', 5.0), \
+        client.diagnostics_entries()
+    assert proc.output().count('the lens state history was cleared') == 1, proc.output()[-2000:]
+
+
+def test_an_unstamped_frame_gets_the_newest_state(running) -> None:
+    client, values, proc = running
+    # After the jump: zoom 0.0 at 10 s (the oldest), now 0.0625 (the newest).
+    client.state(10, 500_000_000, ['zoom'], [0.0625])
+    client.client.spin_for(0.3)
+    msg = make_image(np.zeros((H, W), np.uint8), 'mono8')
+    result = client.frame(msg, 0, 0)
+    npt.assert_allclose(result['info'].k, _exact(values, 0.0625).K.ravel(), rtol=1e-6)

@@ -13,8 +13,18 @@ frame is corrected with is the one AT ITS STAMP t:
 
 per joint (two mechanisms may come from two drivers at two rates). Times are integer
 nanoseconds (ROS ``builtin_interfaces/Time``); a message stamped 0 (a driver that does not
-stamp) is taken at its arrival time. Samples older than :data:`KEEP_NS` behind the newest are
-dropped (at least two are kept), and at most :data:`MAX_SAMPLES` per joint.
+stamp) is taken at its arrival time (the caller passes rmw's received time, not the time it got
+round to the message: messages queued under load keep their own times). A FRAME stamped 0 has
+no time: it gets the newest sample of each joint (``lag_s`` NaN). Samples older than
+:data:`KEEP_NS` behind the newest are dropped (at least two are kept), and at most
+:data:`MAX_SAMPLES` per joint.
+
+Time going back (a ``/clock`` reset, a rosbag played in a loop, a simulator restart) is a jump,
+not a late message: a sample more than :data:`KEEP_NS` older than the newest kept (it would be
+pruned on insert, leaving the stale "future" samples newest), or the node's clock jumping back
+before the newest sample (:meth:`LensStateHistory.time_jumped_back`), clears every joint's
+history, as tf2's buffer does on a jump back; :attr:`LensStateHistory.time_jumps` counts them
+(``/diagnostics``: ``lens_state_time_jumps``) and :attr:`LensStateHistory.last_jump` says which.
 
 A message that carries none of the joints, or only NaN / infinite positions for them, changes
 nothing and is counted in :attr:`LensStateHistory.ignored` (``/diagnostics``:
@@ -103,6 +113,31 @@ class LensStateHistory:
         self.received = 0
         self.ignored = 0
         self.last_ignored = ''
+        self.time_jumps = 0
+        self.last_jump = ''
+
+    def _newest_stamp(self) -> int | None:
+        stamps = [joint.stamps[-1] for joint in self._by_joint.values() if joint.stamps]
+        return max(stamps) if stamps else None
+
+    def _clear(self, why: str) -> None:
+        self._by_joint = {joint: _Joint() for joint in self.joints.values()}
+        self.time_jumps += 1
+        self.last_jump = why
+
+    def time_jumped_back(self, now_ns: int) -> bool:
+        """
+        Clear the history when the clock went back before its newest sample (tf2's rule).
+
+        :param now_ns: the clock's new time, ns.
+        :return: True when samples from the "future" were cleared (and counted).
+        """
+        newest = self._newest_stamp()
+        if newest is None or newest <= int(now_ns):
+            return False
+        self._clear(f'clock went back to {now_ns * 1e-9:.3f} s, '
+                    f'{(newest - int(now_ns)) * 1e-9:.3f} s before the newest state')
+        return True
 
     def add(self, stamp_ns: int, names: Sequence[str], positions: Sequence[float],
             received_ns: int = 0) -> bool:
@@ -118,6 +153,11 @@ class LensStateHistory:
         """
         self.received += 1
         stamp = int(stamp_ns) if stamp_ns else int(received_ns)
+        newest = self._newest_stamp()
+        if newest is not None and stamp < newest - KEEP_NS and any(
+                name in self._by_joint for name in names):
+            self._clear(f'a state stamped {stamp * 1e-9:.3f} s, '
+                        f'{(newest - stamp) * 1e-9:.3f} s before the newest')
         used = False
         reasons = []
         for name, position in zip(names, positions):
@@ -145,7 +185,7 @@ class LensStateHistory:
         """
         Return the lens state at a frame's stamp (interpolated, held after the newest).
 
-        :param stamp_ns: the frame's header stamp, ns.
+        :param stamp_ns: the frame's header stamp, ns (0: unstamped, the newest state).
         :return: the state; mechanisms without any sample are in ``missing``.
         """
         positions: dict[str, float] = {}
@@ -155,6 +195,10 @@ class LensStateHistory:
             joint = self._by_joint[name]
             if not joint.stamps:
                 missing.append(mech)
+                continue
+            if not stamp_ns:
+                # No time to look up: the newest, and no lag to report.
+                positions[mech], lag = joint.positions[-1], math.nan
                 continue
             positions[mech], after = joint.at(int(stamp_ns))
             if after:

@@ -28,8 +28,9 @@ and in the pixel, so it is precomputed coarsely in both and interpolated:
    third of the remap itself. A frame at the same state as the previous one reuses its map.
 
 Memory: per grid state ``(W/16 + 2) (H/16 + 2) x 2`` float32 (68 kB at 1920x1080) plus a few
-matrices; the per-frame map is ``W H x 8`` bytes (16.6 MB at 1080p, one buffer reused, twice
-while a frame holds the previous one). The 17-row zoom with ``refine`` 2: 33 states, 2.3 MB.
+matrices; the per-frame map is ``W H x 8`` bytes (16.6 MB at 1080p) in two buffers that
+alternate (the previous frame's map stays valid while the next is written; nothing is
+allocated per frame while the lens moves). The 17-row zoom with ``refine`` 2: 33 states, 2.3 MB.
 
 Outside a model's valid field the exact tables paint black; here a node beyond it gets the
 position its curve gives at the field's end (held), so the border of the valid field is
@@ -202,6 +203,10 @@ class MovingMaps:
         _, self._resized_h = node_positions(self.out_height, self.step)
         self._lock = threading.Lock()
         self._last: tuple[tuple[float, ...], StateCamera, np.ndarray] | None = None
+        # Two per-frame buffers, alternating: the map handed out last stays valid while the
+        # next state's is written (allocated on first use: a still lens never needs two).
+        self._buffers: list[np.ndarray | None] = [None, None]
+        self._next_buffer = 0
 
     @property
     def memory_bytes(self) -> int:
@@ -275,7 +280,8 @@ class MovingMaps:
         Return the camera and the full map of a frame at a state (the last one reused).
 
         Thread-safe (one frame at a time holds the lock; the map returned is not written
-        again while the same state keeps coming).
+        again while the same state keeps coming, nor by the next state's map: two buffers
+        alternate).
 
         :param state: mechanism -> joint position.
         :return: ``(camera, map)``.
@@ -287,7 +293,11 @@ class MovingMaps:
             if last is not None and last[0] == key:
                 return last[1], last[2]
             camera = self.camera_at(state)
-            full = self.full_map(camera)
+            k = self._next_buffer
+            if self._buffers[k] is None:
+                self._buffers[k] = np.empty((self._resized_h, self._resized_w, 2), np.float32)
+            full = self.full_map(camera, out=self._buffers[k])
+            self._next_buffer = 1 - k
             self._last = (key, camera, full)
             return camera, full
 

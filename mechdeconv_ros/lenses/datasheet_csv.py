@@ -122,7 +122,7 @@ def table_values(path: str | Path, focal_length_mm: float) -> Imported:
     if not (math.isfinite(focal_length_mm) and focal_length_mm > 0.0):
         raise LensImportError(f'--focal-length-mm {focal_length_mm:g}: must be a positive '
                               'focal length in mm')
-    from mechdeconv_ros.lenses.datasheet import table_params
+    from mechdeconv_ros.lenses.datasheet import make_table, table_params
 
     angles, heights, ri = read_table(path)
     try:
@@ -140,10 +140,7 @@ def table_values(path: str | Path, focal_length_mm: float) -> Imported:
                 f'{heights[-1]:g} mm), f = {focal_length_mm:g} mm.',
                 'The sensor is not in the table: add sensor.pixel_size_x_um, pixel_size_y_um, '
                 'width_px and height_px.']
-    warnings = []
-    slope = heights[1] / math.radians(angles[1]) if angles[0] == 0.0 else 0.0
-    if angles[0] == 0.0 and slope > 0 and abs(slope / focal_length_mm - 1.0) > 0.05:
-        warnings.append("the table's first step gives" f' f ~ {slope:.4g} mm, '
-                        f'{100.0 * (slope / focal_length_mm - 1.0):+.1f} % from '
-                        f'--focal-length-mm {focal_length_mm:g}')
+    # The model's own warnings (the focal length against the first point, the PCHIP
+    # fall-back): one rule, in datasheet.make_table, for the import and the node.
+    warnings = list(make_table(values).warnings)
     return Imported(values=values, comments=comments, warnings=warnings)

@@ -110,6 +110,10 @@ def _resolve(lens: ZmxLens, surface: ZmxSurface, wavelength_nm: float) -> Medium
     if not name or name.upper() == 'AIR':
         return Medium('', 1.0)
     model = f'MODEL:{surface.nd:.6g}:{surface.vd:.6g}'
+    if name.upper().startswith('___BLANK') and surface.vd == 0.0 and surface.nd >= 1.0:
+        # vd 0: a constant index at every wavelength (Zemax's reading, and rayoptics').
+        return Medium('', surface.nd, f'surface {surface.number}: ___BLANK with vd 0: a '
+                                      f'constant index {surface.nd:.6g} at every wavelength')
     if surface.glass_mode == 1 or name.upper().startswith('___BLANK'):
         if not _given_nd_vd(surface):
             raise LensImportError(f'{where}: a model glass without nd and vd')
@@ -180,10 +184,12 @@ def _successor(catalog: Any, catalogs: list[str], name: str) -> Any:
 
 
 def _semi_diameter(surface: ZmxSurface) -> float:
-    if surface.aperture > 0.0 and (surface.semi_diameter == 0.0 or
-                                   surface.aperture < surface.semi_diameter):
+    # An automatic DIAM is the footprint Zemax computed for its own field and pupil, not a
+    # clear aperture: only a fixed or picked-up DIAM, or a CLAP, limits the rays.
+    semi = 0.0 if surface.semi_diameter_auto else surface.semi_diameter
+    if surface.aperture > 0.0 and (semi == 0.0 or surface.aperture < semi):
         return surface.aperture
-    return surface.semi_diameter
+    return semi
 
 
 def _pickup_glass(lens: ZmxLens, surface: ZmxSurface) -> ZmxSurface:
@@ -330,16 +336,21 @@ def _aperture(lens: ZmxLens, built: list[Surface], stop: int, out: Imported) -> 
     semi = built[stop].semi_diameter_mm
     if semi > 0.0:
         return 2.0 * semi
-    if lens.entrance_pupil_mm > 0.0 and math.isinf(lens.object_distance_mm):
+    pupil = lens.entrance_pupil_mm
+    if pupil <= 0.0 and lens.f_number > 0.0 and math.isinf(lens.object_distance_mm):
+        # FNUM is the image-space F/# at infinity: EFL / the entrance pupil's diameter.
+        pupil = paraxial(Prescription(tuple(built), 0.0)).efl_mm / lens.f_number
+    if pupil > 0.0 and math.isinf(lens.object_distance_mm):
         # Paraxial marginal ray from infinity at the pupil's edge: (y, n u) = (D/2, 0).
-        y, nu, index = lens.entrance_pupil_mm / 2.0, 0.0, 1.0
+        y, nu, index = pupil / 2.0, 0.0, 1.0
         for surface in built[:stop]:
             nu -= (surface.refractive_index - index) * surface.curvature_per_mm * y
             index = surface.refractive_index
             y += surface.thickness_mm * nu / index
         if abs(y) > 0.0:
             return 2.0 * abs(y)
-    out.warnings.append('the stop has no semi-diameter and the file no usable entrance pupil: '
+    out.warnings.append('the stop has no fixed semi-diameter and the file no usable entrance '
+                        'pupil (ENPD or FNUM, object at infinity): '
                         'lens.aperture_diameter_mm left at its default; set it')
     return float(SPECS['lens.aperture_diameter_mm'].default)
 
@@ -378,11 +389,13 @@ def _largest_aperture(built: list[Surface], stop: int, object_distance: float) -
 def _comments(lens: ZmxLens, wavelength: float, efl: float, distance: float) -> list[str]:
     where = 'infinity' if math.isinf(distance) else f'{distance:.6g} mm before the first vertex'
     title = f' ("{lens.name}")' if lens.name else ''
+    field = f" The file's {lens.field_text}." if lens.field_text else ''
     return [
         f'Imported by `mechdeconv import` from {Path(lens.path).name}{title}, as designed: '
         f'{len(lens.surfaces) - 2} surfaces (file surfaces 1 to {len(lens.surfaces) - 2}; '
         f'ours are numbered from 0), stop = file surface {lens.stop_number}, object at '
-        f'{where}, wavelength {wavelength:.6g} nm, effective focal length {efl:.9g} mm.',
+        f'{where}, wavelength {wavelength:.6g} nm, effective focal length {efl:.9g} mm.'
+        f'{field}',
         'The sensor is not in the file: add sensor.pixel_size_x_um, pixel_size_y_um, '
         'width_px and height_px (or leave width/height 0 for the node to take them from the '
         'images).',

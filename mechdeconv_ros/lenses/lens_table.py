@@ -26,8 +26,9 @@ mechanisms, not of the joints); a mechanism missing from it sits at its first ro
 Refused, naming the parameter (:class:`TableError`, a ``ValueError`` whose text is
 ``<parameter>: <reason>``, as the model's refusals): a table whose length is not n x k, fewer
 than 2 or not strictly increasing positions, a gap index out of range, on a glass thickness
-(the medium after surface i is not air), the last entry (the image distance, which the model
-computes) or moved by both mechanisms, and a moving joint without a prescription. Every
+(the medium after surface i is not air, by its index or by its ``lens.surfaces.glass``
+name), the last entry (the image distance, which the model computes) or moved by both
+mechanisms, and a moving joint without a prescription. Every
 reachable lens (every row, and half-way between consecutive rows, of each mechanism, and their
 combinations) must pass the model's physical rules: :func:`check_reachable` runs a given check
 on each and names the row of a refusal. No ROS, no model import: the check is injected.
@@ -113,8 +114,6 @@ def mechanisms(values: Mapping[str, Any]) -> tuple[Mechanism, ...]:
             raise TableError(f'{prefix}.joint',
                              f'{joint!r} moves lens groups, which needs a prescription '
                              '(lens.surfaces.*): the thick lens has no air gaps')
-        thickness = list(values['lens.surfaces.thickness_mm'])
-        index = list(values['lens.surfaces.refractive_index'])
         positions = np.asarray(values.get(f'{prefix}.positions', []), dtype=np.float64)
         surfaces = [int(i) for i in values.get(f'{prefix}.surfaces', [])]
         table = np.asarray(values.get(f'{prefix}.thickness_mm', []), dtype=np.float64)
@@ -139,24 +138,7 @@ def mechanisms(values: Mapping[str, Any]) -> tuple[Mechanism, ...]:
             raise TableError(f'{prefix}.surfaces',
                              f'is empty: name the gaps (indices into lens.surfaces.thickness_mm) '
                              f'the {name} moves')
-        for i in surfaces:
-            if not 0 <= i < len(thickness):
-                raise TableError(f'{prefix}.surfaces',
-                                 f'{i} is not an index of lens.surfaces.thickness_mm (0 to '
-                                 f'{len(thickness) - 1})')
-            if i == len(thickness) - 1:
-                raise TableError(f'{prefix}.surfaces',
-                                 f'{i} is the last entry of lens.surfaces.thickness_mm, the '
-                                 'image distance, which the model computes: it cannot move')
-            if i < len(index) and float(index[i]) != 1.0:
-                raise TableError(f'{prefix}.surfaces',
-                                 f'{i} is a glass thickness (lens.surfaces.refractive_index[{i}]'
-                                 f' = {float(index[i]):g}): only air gaps move')
-            if i in moved:
-                raise TableError(f'{prefix}.surfaces',
-                                 f'gap {i} is moved by lens.{moved[i]}.surfaces already: a gap '
-                                 'has one mechanism')
-            moved[i] = name
+        _check_gaps(values, prefix, surfaces, moved)
         if len(set(surfaces)) != len(surfaces):
             raise TableError(f'{prefix}.surfaces', 'names a gap twice')
         expected = positions.size * len(surfaces)
@@ -173,6 +155,38 @@ def mechanisms(values: Mapping[str, Any]) -> tuple[Mechanism, ...]:
         out.append(Mechanism(name, joint, positions, tuple(surfaces),
                              table.reshape(positions.size, len(surfaces))))
     return tuple(out)
+
+
+def _check_gaps(values: Mapping[str, Any], prefix: str, surfaces: list[int],
+                moved: dict[int, str]) -> None:
+    """Refuse gap indices a mechanism cannot move (naming ``<prefix>.surfaces``); note them."""
+    name = prefix.split('.')[-1]
+    thickness = list(values['lens.surfaces.thickness_mm'])
+    index = list(values['lens.surfaces.refractive_index'])
+    glass = [str(g).strip() for g in values.get('lens.surfaces.glass', []) or []]
+    for i in surfaces:
+        if not 0 <= i < len(thickness):
+            raise TableError(f'{prefix}.surfaces',
+                             f'{i} is not an index of lens.surfaces.thickness_mm (0 to '
+                             f'{len(thickness) - 1})')
+        if i == len(thickness) - 1:
+            raise TableError(f'{prefix}.surfaces',
+                             f'{i} is the last entry of lens.surfaces.thickness_mm, the '
+                             'image distance, which the model computes: it cannot move')
+        if i < len(index) and float(index[i]) != 1.0:
+            raise TableError(f'{prefix}.surfaces',
+                             f'{i} is a glass thickness (lens.surfaces.refractive_index[{i}]'
+                             f' = {float(index[i]):g}): only air gaps move')
+        # A glass name sets the medium whatever the index array says ('' / AIR: air).
+        if i < len(glass) and glass[i] and glass[i].upper() != 'AIR':
+            raise TableError(f'{prefix}.surfaces',
+                             f'{i} is a glass thickness (lens.surfaces.glass[{i}] = '
+                             f'{glass[i]}): only air gaps move')
+        if i in moved:
+            raise TableError(f'{prefix}.surfaces',
+                             f'gap {i} is moved by lens.{moved[i]}.surfaces already: a gap '
+                             'has one mechanism')
+        moved[i] = name
 
 
 def thicknesses_at(values: Mapping[str, Any], moving: tuple[Mechanism, ...],

@@ -15,16 +15,26 @@ keyword per line; the lines of a surface follow its ``SURF n`` line, indented. R
 - ``UNIT MM|CM|IN|METER`` lens units (converted to mm: curvatures divide, lengths multiply);
 - ``WAVM slot um weight`` (or an older ``WAVL um um ...``) and ``PWAV slot``: wavelengths in
   um and the primary one; ``FTYP type ...`` and ``YFLN``: the field type (0 angle in deg,
-  1 object height, 2 paraxial and 3 real image height) and the y field values; ``ENPD``;
+  1 object height, 2 paraxial and 3 real image height, those in lens units) and the y field
+  values (the design field, named in the import's comments); ``ENPD`` (lens units) or
+  ``FNUM`` (image-space F/#, EFL / ENPD): the system aperture, which sets the stop when the
+  stop has no fixed semi-diameter;
   ``GCAT`` the glass catalogs in the file's order of search; ``MODE``; ``MNUM`` (number of
   configurations: the surface data hold the current one);
 - per surface: ``TYPE`` (STANDARD when absent), ``CURV c`` (1/mm, radius = 1/c, 0 = flat),
   ``DISZ t`` (to the next surface; ``INFINITY`` for an object at infinity), ``GLAS name mode
   pickup nd vd ...`` (the medium after the surface; mode 1 is a model glass of nd/vd, mode 2
-  a pick-up of surface ``pickup``), ``CONI k``, ``PARM j a`` (even asphere: term j is a
-  r^(2j), j = 1 .. 8), ``DIAM s`` (the clear semi-diameter), ``CLAP rmin rmax`` (a circular
-  aperture: the smaller of it and DIAM), ``STOP``, ``SCBD`` / ``SCAD`` (tilts and decenters
-  before / after the surface) and ``COMM``.
+  a pick-up of surface ``pickup``; ``___BLANK`` with vd 0 is a constant index nd, as Zemax and
+  rayoptics read it), ``CONI k``, ``PARM j a`` (on an EVENASPH surface only: term j is a
+  r^(2j), j = 1 .. 8; a STANDARD surface keeps stale PARM values from an earlier type, which
+  are not its sag and are ignored with a note), ``DIAM s solve`` (the semi-diameter: solve 0
+  is Zemax's automatic one, the beam footprint it computed, not an aperture, so it is not
+  imported; fixed (1) or picked up (2) it is the clear semi-diameter), ``CLAP rmin rmax`` (a
+  circular aperture: the smaller of it and DIAM; an annulus, rmin > 0, is refused), ``STOP``,
+  ``SCBD`` / ``SCAD`` (tilts and decenters before / after the surface) and ``COMM``. Apertures
+  this model cannot honour are refused by name: ``SQAP`` / ``ELAP`` (rectangular, elliptical),
+  ``OBSC`` / ``SQOB`` / ``ELOB`` (obscurations), ``SPID`` (spider), ``UDAP`` / ``UDOB``
+  (user-defined).
 
 Everything else (coatings, tolerances, multi-configuration operands, merit functions,
 drawing and POP settings) is read past. The sag of a STANDARD / EVENASPH surface is
@@ -73,6 +83,14 @@ _REFUSED_TYPES = (
     ('FRESNEL', 'a Fresnel surface'),
 )
 
+#: Aperture keywords of a surface this model cannot honour, and what they are.
+_REFUSED_APERTURES = {
+    'SQAP': 'a rectangular aperture', 'ELAP': 'an elliptical aperture',
+    'OBSC': 'a circular obscuration', 'SQOB': 'a rectangular obscuration',
+    'ELOB': 'an elliptical obscuration', 'SPID': 'a spider obscuration',
+    'UDAP': 'a user-defined aperture', 'UDOB': 'a user-defined obscuration',
+}
+
 #: Lens units and their length in mm.
 _UNITS = {'MM': 1.0, 'CM': 10.0, 'IN': 25.4, 'METER': 1000.0, 'M': 1000.0}
 
@@ -111,7 +129,11 @@ class ZmxSurface:
     vd: float = 0.0
     conic: float = 0.0
     asphere: list[float] = field(default_factory=lambda: [0.0] * ASPHERE_TERMS)
+    #: PARM j -> value as read (lens units); the asphere terms once the type is known.
+    parm: dict[int, float] = field(default_factory=dict)
     semi_diameter: float = 0.0
+    #: DIAM's solve is automatic (0): Zemax's computed footprint, not an aperture.
+    semi_diameter_auto: bool = False
     aperture: float = 0.0
     stop: bool = False
     comment: str = ''
@@ -129,7 +151,10 @@ class ZmxLens:
     field_type: int = 0
     field_y: list[float] = field(default_factory=list)
     field_count: int = -1
+    entrance_pupil: float = 0.0
     entrance_pupil_mm: float = 0.0
+    #: FNUM: the image-space F/# (at infinity: EFL / entrance pupil diameter); 0 when absent.
+    f_number: float = 0.0
     catalogs: list[str] = field(default_factory=list)
     configurations: int = 1
     unit_mm: float = 1.0
@@ -162,9 +187,22 @@ class ZmxLens:
 
     @property
     def max_field(self) -> float:
-        """Return the largest y field value (deg or mm, by ``field_type``), 0 when none."""
+        """Return the largest y field value (deg, or mm for FTYP 1-3), 0 when none."""
         values = self.field_y[:self.field_count] if self.field_count >= 0 else self.field_y
-        return max((abs(v) for v in values), default=0.0)
+        scale = self.unit_mm if self.field_type in (1, 2, 3) else 1.0
+        return max((abs(v) for v in values), default=0.0) * scale
+
+    @property
+    def field_text(self) -> str:
+        """Return the design field in words ('' when the file has none)."""
+        if self.max_field == 0.0:
+            return ''
+        what = {0: 'field angle', 1: 'object height', 2: 'paraxial image height',
+                3: 'real image height'}.get(self.field_type)
+        if what is None:
+            return ''
+        unit = 'deg' if self.field_type == 0 else 'mm'
+        return f'design field: {what} up to {self.max_field:.6g} {unit}'
 
 
 def decode(data: bytes, path: str) -> str:
@@ -259,18 +297,22 @@ def _read_surface_line(lens: ZmxLens, surface: ZmxSurface, keyword: str, tokens:
     elif keyword == 'CONI' and value is not None:
         surface.conic = _finite(path, line, keyword, value)
     elif keyword == 'PARM' and len(tokens) >= 3:
+        # What PARM j means depends on the type: read now, applied by _apply_parms.
         term = int(_finite(path, line, keyword, tokens[1]))
-        coefficient = _finite(path, line, keyword, tokens[2])
-        if 1 <= term <= ASPHERE_TERMS:
-            # a_j r^(2j) in lens units: mm^(1 - 2j) after scaling.
-            surface.asphere[term - 1] = coefficient * unit ** (1 - 2 * term)
-        elif coefficient != 0.0 and surface.type.upper() == 'EVENASPH':
-            raise LensImportError(f'{where}: PARM {term} = {coefficient:g}: an even asphere '
-                                  f'has terms 1 to {ASPHERE_TERMS}')
+        surface.parm[term] = _finite(path, line, keyword, tokens[2])
     elif keyword == 'DIAM' and value is not None:
         surface.semi_diameter = abs(_finite(path, line, keyword, value)) * unit
+        solve = _field(tokens, 2)
+        surface.semi_diameter_auto = solve is not None and solve == '0'
     elif keyword == 'CLAP' and len(tokens) >= 3:
+        inner = _finite(path, line, keyword, tokens[1])
+        if inner != 0.0:
+            raise LensImportError(f'{where} has an annular aperture (CLAP rmin {inner:g}): '
+                                  'this model has no central obscuration')
         surface.aperture = abs(_finite(path, line, keyword, tokens[2])) * unit
+    elif keyword in _REFUSED_APERTURES:
+        raise LensImportError(f'{where} has {_REFUSED_APERTURES[keyword]} ({keyword}): this '
+                              'model has circular apertures only (DIAM, CLAP)')
     elif keyword == 'STOP':
         surface.stop = True
     elif keyword == 'COMM':
@@ -343,7 +385,10 @@ def _read_header_line(lens: ZmxLens, keyword: str, tokens: list[str], line: int)
     elif keyword == 'YFLN':
         lens.field_y = [_finite(path, line, keyword, t) for t in tokens[1:]]
     elif keyword == 'ENPD':
-        lens.entrance_pupil_mm = _finite(path, line, keyword, value)
+        # In lens units (converted once UNIT is known, in _check_whole).
+        lens.entrance_pupil = _finite(path, line, keyword, value)
+    elif keyword == 'FNUM':
+        lens.f_number = _finite(path, line, keyword, value)
     elif keyword == 'GCAT':
         lens.catalogs = [t.upper() for t in tokens[1:]]
     elif keyword == 'MNUM':
@@ -390,9 +435,31 @@ def parse(text: str, path: str = '<zmx>') -> ZmxLens:
     return lens
 
 
+def _apply_parms(lens: ZmxLens, surface: ZmxSurface) -> None:
+    """Make PARM values asphere terms on an EVENASPH surface; note stale ones elsewhere."""
+    where = f'{lens.path}: line {surface.line}: surface {surface.number}'
+    if surface.type.upper() != 'EVENASPH':
+        stale = sorted(j for j, a in surface.parm.items() if a != 0.0)
+        if stale:
+            lens.notes.append(f'surface {surface.number} ({surface.type}) carries PARM '
+                              f'{", ".join(map(str, stale))} (left from another surface type: '
+                              'not terms of its sag): ignored')
+        return
+    for term, coefficient in surface.parm.items():
+        if 1 <= term <= ASPHERE_TERMS:
+            # a_j r^(2j) in lens units: mm^(1 - 2j) after scaling.
+            surface.asphere[term - 1] = coefficient * lens.unit_mm ** (1 - 2 * term)
+        elif coefficient != 0.0:
+            raise LensImportError(f'{where}: PARM {term} = {coefficient:g}: an even asphere '
+                                  f'has terms 1 to {ASPHERE_TERMS}')
+
+
 def _check_whole(lens: ZmxLens, seen_keyword: bool) -> None:
     """Refuse a file that is not a complete, sequential refracting lens."""
     path = lens.path
+    lens.entrance_pupil_mm = lens.entrance_pupil * lens.unit_mm
+    for surface in lens.surfaces:
+        _apply_parms(lens, surface)
     if not lens.surfaces:
         what = 'no surfaces (SURF lines)' if seen_keyword else 'no Zemax keywords'
         raise LensImportError(f'{path}: not a Zemax lens file: {what}')

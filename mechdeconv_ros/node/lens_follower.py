@@ -15,7 +15,17 @@ CameraInfos with that state's K, D and P. ``/diagnostics`` gets ``lens_state.<me
 position a frame was last corrected with), ``lens_state_lag_ms`` (frame stamp minus the newest
 state's; > 0: the frame is newer than every state), ``lens_states_received``,
 ``lens_states_ignored`` (no followed joint, or NaN) and ``lens_states_last_ignored``,
-``lens_state_clamped_frames`` and the grid's size (``lens_grid_states``, ``lens_grid_memory_mb``).
+``lens_state_clamped_frames``, ``lens_state_missing_frames`` (frames corrected at a table's
+first row because its joint has sent no state yet, warned, throttled) and the grid's size
+(``lens_grid_states``, ``lens_grid_memory_mb``).
+
+Time: a JointState stamped 0 is placed at its ARRIVAL, rmw's received timestamp (the message
+info of :meth:`_on_joint_state` and of a drained take), carried onto the node's clock (sim time
+included) as ``now - (system_now - received)``: messages queued under load keep distinct times.
+A jump back of the node's clock (``/clock`` reset, a bag loop, a simulator restart) clears the
+history (:meth:`~mechdeconv_ros.imaging.lens_state.LensStateHistory.time_jumped_back`), logged
+once per jump and counted as ``lens_state_time_jumps``. An error while handling one drained
+message is counted (``lens_states_failed``, ``lens_states_last_failure``) and the drain goes on.
 Executor thread only.
 """
 
@@ -30,6 +40,9 @@ from mechdeconv_ros.imaging.moving_maps import MovingRectifier, StateCamera
 from mechdeconv_ros.node.diagnostics import FrameStats
 from mechdeconv_ros.node.image_msgs import fill_camera_info
 from mechdeconv_ros.schema.params import MECHANISMS
+from rclpy.clock import JumpThreshold, TimeJump
+from rclpy.duration import Duration
+from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, JointState
@@ -82,6 +95,15 @@ class LensFollower:
         self._infos = (CameraInfo(), CameraInfo())
         self._warned_at = -CLAMP_WARN_S
         self.clamped_frames = 0
+        self._missing_warned_at = -CLAMP_WARN_S
+        self.missing_frames = 0
+        self.failed = 0
+        self.last_failure = ''
+        # tf2's buffer clears on any jump back of its clock; so does the history.
+        self._jump_handle = node.get_clock().create_jump_callback(
+            JumpThreshold(min_forward=None, min_backward=Duration(nanoseconds=-1),
+                          on_clock_change=False),
+            post_callback=self._on_time_jump)
 
     def configure(self, values: Mapping[str, Any]) -> None:
         """Subscribe while a joint is set; a change of joint names starts a new history."""
@@ -116,26 +138,55 @@ class LensFollower:
         taken = 0
         if sub is None:
             return 0
+        take = getattr(sub.handle, 'take_message', None)
+        if take is None:        # an rclpy without it: the executor delivers them
+            return 0
         try:
             with sub.handle:
                 while taken < limit:
-                    got = sub.handle.take_message(sub.msg_type, sub.raw)
+                    got = take(sub.msg_type, sub.raw)
                     if got is None:
                         break
-                    self._on_joint_state(got[0])
                     taken += 1
-        except Exception:       # noqa: B902 - an rclpy without it: the executor delivers them
+                    try:
+                        self._on_joint_state(*got)
+                    except Exception as err:    # noqa: B902 - one bad message, not the rest
+                        self.failed += 1
+                        self.last_failure = repr(err)
+                        self._publish_stats(None)
+        except InvalidHandle:   # the subscription was destroyed (a reconfigure)
             pass
         return taken
 
-    def _on_joint_state(self, msg: JointState) -> None:
+    def _on_joint_state(self, msg: JointState, info: Mapping[str, Any]) -> None:
+        # Two parameters: rclpy then passes the message info (its received timestamp).
         history = self.history
         if history is None:
             return
         stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-        history.add(stamp, list(msg.name), list(msg.position),
-                    received_ns=self._node.get_clock().now().nanoseconds)
+        now = self._node.get_clock().now().nanoseconds
+        received = now
+        if not stamp and info and info.get('received_timestamp'):
+            # rmw's received time is the system clock's: carry its age onto the node's clock.
+            age = max(0, time.time_ns() - int(info['received_timestamp']))
+            received = now - age
+        jumps = history.time_jumps
+        history.add(stamp, list(msg.name), list(msg.position), received_ns=received)
+        if history.time_jumps != jumps:
+            self._warn_jump(history)
         self._publish_stats(None)
+
+    def _warn_jump(self, history: LensStateHistory) -> None:
+        self._warn(f'lens_state: time went back ({history.last_jump}); the lens state history '
+                   f'was cleared ({history.time_jumps} jumps so far)')
+
+    def _on_time_jump(self, jump: TimeJump) -> None:
+        history = self.history
+        if history is None or jump.delta.nanoseconds >= 0:
+            return
+        if history.time_jumped_back(self._node.get_clock().now().nanoseconds):
+            self._warn_jump(history)
+            self._publish_stats(None)
 
     def prepare(self, header: Any, rectifier: MovingRectifier) -> tuple[CameraInfo, CameraInfo]:
         """
@@ -149,10 +200,21 @@ class LensFollower:
         stamp = header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
         positions: dict[str, float] = {}
         lag_ms = float('nan')
+        missing: tuple[str, ...] = ()
         if self.history is not None:
             at = self.history.at(stamp)
-            positions, lag_ms = at.positions, at.lag_s * 1e3
+            positions, lag_ms, missing = at.positions, at.lag_s * 1e3, at.missing
         state, clamped = rectifier.grid.clamp(positions)
+        if missing:
+            # No JointState of that joint yet: the table's first row, said out loud.
+            self.missing_frames += 1
+            now = time.monotonic()
+            if now - self._missing_warned_at >= CLAMP_WARN_S:
+                self._missing_warned_at = now
+                self._warn(', '.join(
+                    f'lens.{m}: no lens_state of joint {self.history.joints[m]!r} yet; '
+                    f'correcting at lens.{m}.positions[0] = {state[m]:g}' for m in missing
+                    if m in state) + f' ({self.missing_frames} frames so far)')
         if clamped:
             self.clamped_frames += 1
             now = time.monotonic()
@@ -183,6 +245,9 @@ class LensFollower:
         extra['lens_states_received'] = history.received
         extra['lens_states_ignored'] = history.ignored
         extra['lens_states_last_ignored'] = history.last_ignored
+        extra['lens_states_failed'] = self.failed
+        extra['lens_states_last_failure'] = self.last_failure
+        extra['lens_state_time_jumps'] = history.time_jumps
         for mech, position in history.newest().items():
             extra[f'lens_state_newest.{mech}'] = position
         if frame:
@@ -190,6 +255,7 @@ class LensFollower:
                 extra[f'lens_state.{mech}'] = position
             extra['lens_state_lag_ms'] = frame['lag_ms']
             extra['lens_state_clamped_frames'] = self.clamped_frames
+            extra['lens_state_missing_frames'] = self.missing_frames
             grid = frame['grid']
             extra['lens_grid_states'] = len(grid.cameras)
             extra['lens_grid_memory_mb'] = round(
