@@ -57,6 +57,7 @@ from mechdeconv_ros.lenses.lens_params import make_prescription
 from mechdeconv_ros.lenses.lens_source import LensSource
 from mechdeconv_ros.lenses.moving_source import source_for
 from mechdeconv_ros.model import lateral_color
+from mechdeconv_ros.model.assembly import axis_pixel
 from mechdeconv_ros.model.camera_info_fit import (
     boundary_points, choose_equivalent, EQUIVALENT_MAX_ERROR_PX, EquivalentFit, fit_equivalent)
 from mechdeconv_ros.model.lateral_color import LateralColor
@@ -369,7 +370,9 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
     py = float(vals['sensor.pixel_size_y_um']) * 1e-3
     refusals.check_circle_of_confusion(vals, f, w * px, h * py)
     fx, fy = v / px, v / py
-    K = np.array([[fx, 0.0, (w - 1) / 2.0], [0.0, fy, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
+    # The principal point is where the lens axis meets the sensor (sensor.axis_offset_*).
+    cx, cy = axis_pixel(vals, w, h, (px, py))
+    K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
 
     projection = str(vals['output.projection'])
     cap = field_cap_rad(distance)
