@@ -254,21 +254,56 @@ def unproject_angles(model: Any, u: FloatArray,
     return theta, phi
 
 
+class _Cubic:
+    """The cubic Hermite interpolant of :func:`~mechdeconv_ros.model.radial_map.hermite`."""
+
+    def __init__(self, x: FloatArray, y: FloatArray) -> None:
+        self.x0, self.h, self.y = float(x[0]), float(x[1] - x[0]), y
+        self.d = _knot_slopes(self.y, self.h)
+
+    def __call__(self, query: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Return the value and the derivative at ``query`` (within the knots)."""
+        h, y, d = self.h, self.y, self.d
+        k = np.clip(((query - self.x0) / h).astype(np.int64), 0, y.size - 2)
+        t = (query - (self.x0 + k * h)) / h
+        t2 = t * t
+        t3 = t2 * t
+        value = ((2.0 * t3 - 3.0 * t2 + 1.0) * y[k] + (t3 - 2.0 * t2 + t) * h * d[k]
+                 + (3.0 * t2 - 2.0 * t3) * y[k + 1] + (t3 - t2) * h * d[k + 1])
+        slope = ((6.0 * t2 - 6.0 * t) * (y[k] - y[k + 1]) / h + (3.0 * t2 - 4.0 * t + 1.0) * d[k]
+                 + (3.0 * t2 - 2.0 * t) * d[k + 1])
+        return value, slope
+
+
+def _knot_slopes(y: FloatArray, h: float) -> FloatArray:
+    """Return the knot slopes :func:`~mechdeconv_ros.model.radial_map.hermite` uses."""
+    d = np.empty(y.size)
+    d[2:-2] = (y[:-4] - 8.0 * y[1:-3] + 8.0 * y[3:-1] - y[4:]) / (12.0 * h)
+    d[0] = (-25.0 * y[0] + 48.0 * y[1] - 36.0 * y[2] + 16.0 * y[3] - 3.0 * y[4]) / (12.0 * h)
+    d[1] = (-3.0 * y[0] - 10.0 * y[1] + 18.0 * y[2] - 6.0 * y[3] + y[4]) / (12.0 * h)
+    d[-1] = (25.0 * y[-1] - 48.0 * y[-2] + 36.0 * y[-3] - 16.0 * y[-4] + 3.0 * y[-5]) / (12.0 * h)
+    d[-2] = (3.0 * y[-1] + 10.0 * y[-2] - 18.0 * y[-3] + 6.0 * y[-4] - y[-5]) / (12.0 * h)
+    return d
+
+
 def _solve_theta(field: RadialMap, radius: FloatArray, dz: FloatArray,
                  start: FloatArray) -> FloatArray:
     """Solve ``h(theta) + s(theta) dz = radius`` by Newton from ``start`` (NaN: no root)."""
     top = field.max_field_angle_rad
     theta = np.where(np.isfinite(start), start, top)
-    step = 1e-7 * max(top, 1e-3)
+    slope = field.slope if field.slope is not None else field.real_mm * 0.0
+    height_of, slope_of = _Cubic(field.field_angle_rad, field.real_mm), \
+        _Cubic(field.field_angle_rad, slope)
     for _ in range(INVERSE_ITERATIONS):
-        h, s = lines_at(field, theta)
-        other = np.where(theta + step <= top, theta + step, theta - step)
-        h1, s1 = lines_at(field, other)
-        value = h + s * dz
+        h, dh = height_of(theta)
+        s, ds = slope_of(theta)
         with np.errstate(invalid='ignore', divide='ignore'):
-            derivative = (h1 + s1 * dz - value) / (other - theta)
-            theta = np.clip(theta - (value - radius) / derivative, 0.0, top)
-    h, s = lines_at(field, theta)
+            step = (h + s * dz - radius) / (dh + ds * dz)
+        theta = np.clip(theta - step, 0.0, top)
+        if not np.nanmax(np.abs(step), initial=0.0) > 1e-14:
+            break
+    h, _ = height_of(theta)
+    s, _ = slope_of(theta)
     residual = np.abs(h + s * dz - radius)
     return np.where(residual <= 1e-9 * (1.0 + radius), theta, np.nan)
 
@@ -286,3 +321,103 @@ def unproject(model: Any, u: FloatArray, v: FloatArray) -> tuple[FloatArray, Flo
     with np.errstate(invalid='ignore'):
         t = np.where(theta < 0.5 * math.pi, np.tan(theta), np.nan)
     return t * np.cos(phi), t * np.sin(phi)
+
+
+@dataclass(frozen=True)
+class MapForm:
+    """
+    The projection of a corrected pixel, linear in its normalised ideal coordinates.
+
+    For a corrected pixel with normalised ideal coordinates ``(x, y)`` (``K_new``), radius
+    ``r = hypot(x, y)`` (tan theta or theta), the curve gives ``g = h / (v r)`` (the real over
+    the ideal height, 1 on the axis) and ``sigma = s / r`` (the chief ray's slope per unit of
+    normalised radius). With ``L = n_x x + n_y y`` and ``D = sigma L + n_z``, the plane
+    intersection of the module docstring becomes
+
+        ``u = c_u + g (v / D) (ax x + ay y)``,  ``v = c_v + g (v / D) (bx x + by y)``
+
+    with ``ax = (n_z R00 - n_x R20) / p_x``, ``ay = (n_z R10 - n_y R20) / p_x`` and
+    ``bx``, ``by`` likewise from the second column over ``p_y``: a few multiply-adds per
+    pixel (no trigonometry). ``D <= 0``: the line does not meet the plane (invalid).
+    Untilted, ``D = 1`` and ``u = c_u + f_x x g``: the radial map.
+    """
+
+    cu: float
+    cv: float
+    v_mm: float
+    ax: float
+    ay: float
+    bx: float
+    by: float
+    nx: float
+    ny: float
+    nz: float
+    tilted: bool
+
+    @classmethod
+    def of(cls, model: Any) -> MapForm:
+        """
+        Return the form of a model (its K, pixel pitches, image distance and sensor pose).
+
+        :param model: a :class:`~mechdeconv_ros.model.model.LensModel`.
+        :return: the form.
+        """
+        pose = SensorPose.from_values(model.values)
+        r = pose.rotation()
+        nx, ny, nz = r[0, 2], r[1, 2], r[2, 2]
+        px, py = model.pixel_mm
+        return cls(float(model.K[0, 2]), float(model.K[1, 2]), float(model.image_distance_mm),
+                   (nz * r[0, 0] - nx * r[2, 0]) / px, (nz * r[1, 0] - ny * r[2, 0]) / px,
+                   (nz * r[0, 1] - nx * r[2, 1]) / py, (nz * r[1, 1] - ny * r[2, 1]) / py,
+                   float(nx), float(ny), float(nz), pose.tilted)
+
+
+def curve_tables(curve: RadialMap, v_mm: float) -> tuple[FloatArray, FloatArray]:
+    """
+    Return ``g = h / ideal`` and ``sigma = s / r`` over a curve's samples (ideal = v r).
+
+    :param curve: a radial map with slopes (the model's, in the output projection).
+    :param v_mm: the image distance (normalised radius = ideal / v).
+    :return: ``(g, sigma)``, each the curve's length; on the axis their limits (1, and the
+        slope's derivative by extrapolation).
+    """
+    ideal = curve.ideal_mm
+    with np.errstate(invalid='ignore', divide='ignore'):
+        g = np.where(ideal > 0.0, curve.real_mm / ideal, 1.0)
+        slope = curve.slope if curve.slope is not None else curve.real_mm / v_mm
+        sigma = np.where(ideal > 0.0, slope * v_mm / ideal, np.nan)
+    if sigma.size > 2:
+        sigma[0] = 2.0 * sigma[1] - sigma[2]
+    elif sigma.size:
+        sigma[0] = sigma[-1] if sigma.size > 1 else 1.0
+    return g, sigma
+
+
+def raw_from_normalised(model: Any, x: FloatArray, y: FloatArray, curve: RadialMap | None = None,
+                        hold: bool = False) -> tuple[FloatArray, FloatArray]:
+    """
+    Return the raw pixel of normalised ideal coordinates (the maps' equation, in float64).
+
+    :param model: a :class:`~mechdeconv_ros.model.model.LensModel`.
+    :param x: ideal ``x`` (tan theta cos phi for a pinhole output, theta cos phi equidistant).
+    :param y: ideal ``y``.
+    :param curve: the radial map (default ``model.curve``; a colour channel's).
+    :param hold: beyond the curve keep its last sample (a moving lens's node map) instead of
+        NaN.
+    :return: ``(u, v)``; NaN outside the valid field or where no line meets the plane.
+    """
+    form = MapForm.of(model)
+    curve = model.curve if curve is None else curve
+    g_table, sigma_table = curve_tables(curve, form.v_mm)
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    ideal = np.hypot(x, y) * form.v_mm
+    g = np.interp(ideal, curve.ideal_mm, g_table)
+    sigma = np.interp(ideal, curve.ideal_mm, sigma_table)
+    if not hold:
+        g = np.where(ideal <= curve.valid_ideal_mm, g, np.nan)
+    denominator = sigma * (form.nx * x + form.ny * y) + form.nz
+    with np.errstate(invalid='ignore', divide='ignore'):
+        q = np.where(denominator > 0.0, g * form.v_mm / denominator, np.nan)
+    return (form.cu + q * (form.ax * x + form.ay * y),
+            form.cv + q * (form.bx * x + form.by * y))
