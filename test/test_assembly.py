@@ -8,7 +8,7 @@ import math
 
 from mechdeconv_ros.model.assembly import (
     plane_offsets, project, SensorPose, unproject, unproject_angles)
-from mechdeconv_ros.model.model import build_model
+from mechdeconv_ros.model.model import build_model, ModelError
 from mechdeconv_ros.tools.cli import main
 import numpy as np
 from numpy.testing import assert_allclose
@@ -127,3 +127,61 @@ def test_cli_project_names_the_bad_line(tmp_path, capsys):
     status = main(['project', '--width', '64', '--height', '48', str(path)])
     _, err = capsys.readouterr()
     assert status == 2 and 'in.csv:2' in err
+
+
+@pytest.mark.parametrize('extra, parameter, words', [
+    ({'sensor.axis_offset_x_mm': 1.4}, 'sensor.axis_offset_x_mm', 'off the sensor'),
+    ({'sensor.axis_offset_y_mm': -1.1}, 'sensor.axis_offset_y_mm', 'off the sensor'),
+    # A sensor 0.05 mm behind the vertex of the convex rear surface (r2 = -4 mm): tilted
+    # 10 deg, its pixels 0.4 to 1 mm from the axis would cut the glass.
+    ({'lens.image_distance_mm': 0.05, 'sensor.tilt_y_deg': 10.0}, 'sensor.tilt_y_deg',
+     'hit the lens'),
+    ({'lens.image_distance_mm': 0.05, 'sensor.tilt_x_deg': -9.0, 'sensor.tilt_y_deg': 3.0},
+     'sensor.tilt_x_deg', 'hit the lens'),
+])
+def test_refusals_name_the_parameter(extra, parameter, words):
+    with pytest.raises(ModelError) as err:
+        build_model({**SIZE, **extra})
+    assert err.value.parameter == parameter and words in str(err.value)
+
+
+def test_refusal_on_the_cli(capsys):
+    status = main(['project', '--width', '640', '--height', '480', '-p',
+                   'sensor.axis_offset_x_mm=2', '-'])
+    _, err = capsys.readouterr()
+    assert status == 2 and 'sensor.axis_offset_x_mm' in err
+
+
+def _consumer_error(model, every_px=(41, 31)):
+    """Largest distance between a raw pixel and where cv2 projects its traced direction."""
+    import cv2
+    us = np.linspace(0, model.width - 1, every_px[0])
+    vs = np.linspace(0, model.height - 1, every_px[1])
+    uu, vv = (a.ravel() for a in np.meshgrid(us, vs))
+    theta, phi = unproject_angles(model, uu, vv)
+    keep = np.isfinite(theta) & (theta < math.radians(89.0))
+    t = np.tan(theta[keep])
+    points = np.stack([t * np.cos(phi[keep]), t * np.sin(phi[keep]), np.ones(t.size)], axis=1)
+    projected, _ = cv2.projectPoints(points, np.zeros(3), np.zeros(3), model.K,
+                                     np.array(model.D))
+    projected = projected.reshape(-1, 2)
+    return float(np.max(np.hypot(projected[:, 0] - uu[keep], projected[:, 1] - vv[keep])))
+
+
+def test_camera_info_of_an_offset_sensor_is_exact_for_consumers():
+    model = build_model({**SIZE, 'sensor.axis_offset_x_mm': 0.04,
+                         'sensor.axis_offset_y_mm': -0.025})
+    assert model.distortion_model == 'plumb_bob'
+    assert _consumer_error(model) <= 0.05
+    assert model.equivalent_max_error_px <= 0.05
+
+
+def test_camera_info_of_a_tilted_sensor_fits_tangential_terms():
+    model = build_model({**SIZE, 'sensor.tilt_x_deg': 0.3, 'sensor.tilt_y_deg': -0.2})
+    assert model.distortion_model in ('plumb_bob', 'rational_polynomial')
+    assert model.D[2] != 0.0 and model.D[3] != 0.0          # p1, p2
+    # The published error is what a consumer (cv2's own projection) sees.
+    assert _consumer_error(model) == pytest.approx(model.equivalent_max_error_px, rel=0.2,
+                                                   abs=0.005)
+    if model.equivalent_max_error_px > 0.05:
+        assert any('no ROS distortion model' in w for w in model.warnings)
