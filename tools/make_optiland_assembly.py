@@ -226,7 +226,11 @@ def lens_entry(ref: Any, key: str, config: str) -> dict[str, Any]:
     from mechdeconv_ros.model.model import build_model
     from mechdeconv_ros.schema.params import load_params_file
 
-    values = load_params_file(REPO / 'config' / config)
+    from mechdeconv_ros.lenses.lens_params import with_glass_indices
+
+    # Named glasses as the indices our catalogue gives at lens.wavelength_nm (a config's
+    # refractive_index column is rounded to 6 decimals: 2.5e-3 px at the triplet's corner).
+    values = with_glass_indices(load_params_file(REPO / 'config' / config))
     w, h = int(values['sensor.width_px']), int(values['sensor.height_px'])
     px, py = (float(values[f'sensor.pixel_size_{a}_um']) * 1e-3 for a in 'xy')
     ours = build_model(values)
@@ -310,13 +314,15 @@ def main(argv: list[str] | None = None) -> int:
     """Trace every lens and pose and write the JSON."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0].strip())
     parser.add_argument('-o', '--output', type=Path, default=DEFAULT_OUTPUT)
-    parser.add_argument('--only', help='one lens key')
+    parser.add_argument('--only', help='trace one lens key, keep the others of the output')
     args = parser.parse_args(argv)
     import warnings
     warnings.filterwarnings('ignore')
     ref = _load('make_optiland_reference')
     start = time.monotonic()
     lenses = {}
+    if args.only and args.output.exists():
+        lenses = json.loads(args.output.read_text())['lenses']
     for key, config in LENSES:
         if args.only and key != args.only:
             continue
