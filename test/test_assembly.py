@@ -185,3 +185,93 @@ def test_camera_info_of_a_tilted_sensor_fits_tangential_terms():
                                                    abs=0.005)
     if model.equivalent_max_error_px > 0.05:
         assert any('no ROS distortion model' in w for w in model.warnings)
+
+
+# --- .zmx: a coordinate break before the image surface places the sensor --------------------
+
+def _singlet_with_break(params: str, disz: str = '0') -> str:
+    from test_zmx import SINGLET
+    block = ('SURF 3\n  TYPE COORDBRK\n  CURV 0.0\n' + params + f'  DISZ {disz}\nSURF 4\n')
+    return SINGLET.replace('  DISZ 47.5', '  DISZ 46.5').replace('SURF 3\n', block)
+
+
+def _import(text: str):
+    from mechdeconv_ros.lenses.lens_import import zmx_values
+    from mechdeconv_ros.lenses.zmx import parse
+    from test_zmx import fixed_index
+    return zmx_values(parse(text, 'cb.zmx'), resolve=fixed_index)
+
+
+def _rx(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def _ry(b):
+    c, s = math.cos(b), math.sin(b)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def test_zmx_break_before_the_image_decenters_the_sensor():
+    values = _import(_singlet_with_break('  PARM 1 0.1\n  PARM 2 -0.05\n')).values
+    assert values['sensor.axis_offset_x_mm'] == pytest.approx(0.1)
+    # The file's +y is up in the image; v grows downwards.
+    assert values['sensor.axis_offset_y_mm'] == pytest.approx(0.05)
+    assert values['sensor.tilt_x_deg'] == 0.0 and values['sensor.tilt_y_deg'] == 0.0
+    assert values['lens.image_distance_mm'] == pytest.approx(46.5)
+    dummy = _import(_singlet_with_break('  PARM 1 0\n', disz='1')).values
+    assert 'sensor.axis_offset_x_mm' not in dummy
+    assert dummy['lens.image_distance_mm'] == pytest.approx(47.5)
+
+
+@pytest.mark.parametrize('order', [0, 1])
+def test_zmx_break_geometry_is_the_sensor_plane(order):
+    dx, dy, a, b, t = 0.3, -0.2, 2.0, -1.5, 0.4
+    text = _singlet_with_break(f'  PARM 1 {dx}\n  PARM 2 {dy}\n  PARM 3 {a}\n  PARM 4 {b}\n'
+                               f'  PARM 6 {order}\n', disz=str(t))
+    values = _import(text).values
+    # The break, as Zemax places it: frame F = R_x(a) R_y(b), origin decentred (before or
+    # after the tilt), the image surface t along the new z.
+    frame = _rx(math.radians(a)) @ _ry(math.radians(b))
+    origin = (np.array([dx, dy, 46.5]) if order == 0
+              else frame @ np.array([dx, dy, 0.0]) + np.array([0.0, 0.0, 46.5]))
+    vertex = origin + t * frame[:, 2]
+    # Our sensor: the axis point at image_distance, R = R_x(tilt_x) R_y(tilt_y) in the read-out
+    # frame (a, b, z) = (-x, y, z); the centre at (a, b) = -offset.
+    pose = SensorPose.from_values(values)
+    r = pose.rotation()
+    centre = np.array([0.0, 0.0, values['lens.image_distance_mm']]) + r @ np.array(
+        [-pose.offset_x_mm, -pose.offset_y_mm, 0.0])
+    centre_lens = np.array([-centre[0], centre[1], centre[2]])
+    np.testing.assert_allclose(centre_lens, vertex, atol=1e-12)
+    # Same plane: the normals agree (read-out normal turned to the lens frame).
+    normal = r[:, 2] * np.array([-1.0, 1.0, 1.0])
+    np.testing.assert_allclose(np.abs(normal @ frame[:, 2]), 1.0, atol=1e-12)
+    # And the rows: the read-out a axis is the lens frame's -x turned.
+    np.testing.assert_allclose(r[:, 0] * np.array([-1.0, 1.0, 1.0]), -frame[:, 0],
+                               atol=1e-12)
+
+
+@pytest.mark.parametrize('params, words', [
+    ('  PARM 3 45\n', ['line 39', 'PARM 3', '45 deg']),
+    ('  PARM 1 nan\n', ['line 39', 'PARM']),
+    ('  PARM 5 3\n', ['line 39', 'about the axis']),
+    ('  PARM 1 1e6\n', ['line 39', 'off the axis']),
+])
+def test_zmx_hostile_breaks_are_refused_naming_the_line(params, words):
+    from mechdeconv_ros.lenses.zmx import LensImportError
+    with pytest.raises(LensImportError) as err:
+        _import(_singlet_with_break(params))
+    for word in words:
+        assert word in str(err.value), (word, str(err.value))
+
+
+def test_zmx_element_decenter_stays_refused():
+    from mechdeconv_ros.lenses.zmx import LensImportError
+    from test_zmx import SINGLET
+    text = SINGLET.replace('SURF 2\n', 'SURF 2\n  TYPE COORDBRK\n  PARM 1 0.2\n  DISZ 0\n'
+                                       'SURF 3\n').replace('SURF 3\n  TYPE STANDARD\n  CURV 0.0'
+                                                           '\n  DISZ 0', 'SURF 4\n  TYPE '
+                                                           'STANDARD\n  CURV 0.0\n  DISZ 0')
+    with pytest.raises(LensImportError, match='inside the lens'):
+        _import(text)
