@@ -275,3 +275,29 @@ def test_zmx_element_decenter_stays_refused():
                                                            'STANDARD\n  CURV 0.0\n  DISZ 0')
     with pytest.raises(LensImportError, match='inside the lens'):
         _import(text)
+
+
+def test_datasheet_and_colour_channels_take_the_pose():
+    from mechdeconv_ros.imaging.remap import Rectifier
+    from mechdeconv_ros.schema.params import load_params_file
+    # A datasheet table: its chief rays run through the rear principal point (s = h / v).
+    table = {**SIZE, 'lens.focal_length_mm': 4.0,
+             'lens.datasheet.field_angle_deg': [0.0, 10.0, 20.0, 30.0, 40.0],
+             'lens.datasheet.image_height_mm': [0.0, 0.7045, 1.4499, 2.2893, 3.2826],
+             'scene.distance_mm': 0.0, 'sensor.tilt_x_deg': 1.0,
+             'sensor.axis_offset_x_mm': 0.03}
+    model = build_model(table)
+    assert model.K[0, 2] == pytest.approx(319.5 + 0.03 / model.pixel_mm[0])
+    theta, phi = unproject_angles(model, np.array([10.0, 600.0]), np.array([20.0, 400.0]))
+    u, v = project(model, np.tan(theta) * np.cos(phi), np.tan(theta) * np.sin(phi))
+    assert_allclose(u, [10.0, 600.0], atol=1e-6)
+    assert_allclose(v, [20.0, 400.0], atol=1e-6)
+    # Lateral colour: each channel's maps meet the same tilted plane.
+    values = load_params_file('config/cooke_triplet.yaml')
+    values.update({'sensor.width_px': 480, 'sensor.height_px': 270,
+                   'sensor.pixel_size_x_um': 32.0, 'sensor.pixel_size_y_um': 32.0,
+                   'sensor.tilt_y_deg': 1.0, 'output.lateral_color_correction': True})
+    colour = Rectifier(build_model(values))
+    assert colour.colour is not None
+    frame = np.full((270, 480, 3), 128, np.uint8)
+    assert colour.correct(frame, colours=(0, 1, 2)).shape == frame.shape
