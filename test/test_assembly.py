@@ -174,6 +174,18 @@ def test_camera_info_of_an_offset_sensor_is_exact_for_consumers():
     assert model.distortion_model == 'plumb_bob'
     assert _consumer_error(model) <= 0.05
     assert model.equivalent_max_error_px <= 0.05
+    # A consumer's rectification (cv2.initUndistortRectifyMap on K, D, to our K_new) against
+    # the traced maps.
+    import cv2
+    map_x, map_y = cv2.initUndistortRectifyMap(model.K, np.array(model.D), None, model.K_new,
+                                               (model.out_width, model.out_height),
+                                               cv2.CV_32FC1)
+    uu, vv = np.meshgrid(np.arange(0, model.out_width, 7), np.arange(0, model.out_height, 7))
+    raw = model.raw_from_rect(np.stack([uu, vv], axis=-1).astype(float))
+    inside = ((raw[..., 0] >= 0) & (raw[..., 0] <= model.width - 1) & (raw[..., 1] >= 0)
+              & (raw[..., 1] <= model.height - 1))
+    error = np.hypot(map_x[vv, uu] - raw[..., 0], map_y[vv, uu] - raw[..., 1])[inside]
+    assert inside.sum() > 1000 and error.max() <= 0.05
 
 
 def test_camera_info_of_a_tilted_sensor_fits_tangential_terms():
