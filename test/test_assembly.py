@@ -348,3 +348,17 @@ def test_maps_are_the_projection(pose):
     u, v = project(model, tx, ty)
     assert_allclose(u, map_x[valid][::97], atol=0.01)
     assert_allclose(v, map_y[valid][::97], atol=0.01)
+
+
+def test_cli_project_nan_where_no_chief_ray_passes(tmp_path, capsys):
+    path = tmp_path / 'in.csv'
+    # The Cooke triplet's clear apertures pass about 25 deg: 63 deg has no chief ray; 25 deg
+    # lands beyond the 1920 px sensor.
+    path.write_text('0.1,0\n0.47,0\n2,0\n')
+    status = main(['project', '--params', 'config/cooke_triplet.yaml', str(path)])
+    out, _ = capsys.readouterr()
+    rows = [line.split(',') for line in out.splitlines()]
+    assert status == 0 and len(rows) == 3
+    assert 959.5 < float(rows[0][2]) < 1919.5
+    assert float(rows[1][2]) > 1919.5
+    assert rows[2][2:] == ['nan', 'nan']
