@@ -362,3 +362,15 @@ def test_cli_project_nan_where_no_chief_ray_passes(tmp_path, capsys):
     assert 959.5 < float(rows[0][2]) < 1919.5
     assert float(rows[1][2]) > 1919.5
     assert rows[2][2:] == ['nan', 'nan']
+
+
+@pytest.mark.parametrize('pose', [
+    {'sensor.axis_offset_x_mm': 0.2, 'sensor.axis_offset_y_mm': -0.15},
+    {'sensor.axis_offset_x_mm': 0.2, 'sensor.tilt_x_deg': 1.0, 'sensor.tilt_y_deg': -0.7}])
+def test_alpha_zero_keeps_only_valid_pixels_off_centre(pose):
+    from mechdeconv_ros.imaging.remap import Rectifier
+    model = build_model({**SIZE, **pose})
+    # The principal point follows the axis (the raw image is framed as it was).
+    assert model.K_new[0, 2] > 319.5 + 0.5 * 0.2 / model.pixel_mm[0]
+    out = Rectifier(model).correct(np.full((480, 640), 200, np.uint8))
+    assert int((out < 100).sum()) == 0
