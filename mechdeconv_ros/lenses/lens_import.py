@@ -232,6 +232,7 @@ def zmx_values(lens: ZmxLens, wavelength_nm: float | None = None,
     out.values['scene.distance_mm'] = (0.0 if math.isinf(distance)
                                        else distance + para.front_principal_z_mm)
     _optional_values(surfaces, media, wavelength, out)
+    out.values.update(lens.sensor_pose)   # a coordinate break before the image (zmx)
     out.comments[:0] = _comments(lens, wavelength, para.efl_mm, distance)
     _check(lens, out)
     return out

@@ -48,6 +48,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 import math
+from types import SimpleNamespace
 from typing import Any, Mapping
 
 from mechdeconv_ros.lenses import refusals
@@ -56,8 +57,12 @@ from mechdeconv_ros.lenses.lens_params import make_prescription
 from mechdeconv_ros.lenses.lens_source import LensSource
 from mechdeconv_ros.lenses.sources import source_for
 from mechdeconv_ros.model import lateral_color
+from mechdeconv_ros.model.assembly import (
+    axis_pixel, check_pose, raw_from_normalised, SensorPose, unproject_angles)
 from mechdeconv_ros.model.camera_info_fit import (
-    boundary_points, choose_equivalent, EQUIVALENT_MAX_ERROR_PX, EquivalentFit, fit_equivalent)
+    boundary_points, choose_equivalent, EQUIVALENT_MAX_ERROR_PX, EquivalentFit, fit_equivalent,
+    raw_probe_points)
+from mechdeconv_ros.model.camera_info_tilt import fit_tilted
 from mechdeconv_ros.model.lateral_color import LateralColor
 from mechdeconv_ros.model.radial_map import (
     COARSE_SAMPLES, CURVE_SAMPLES, field_cap_rad, projected, RadialMap, resample, trace_curve)
@@ -185,9 +190,7 @@ class LensModel:
         points_px = np.asarray(points_px, dtype=np.float64)
         xn = (points_px[..., 0] - self.K_new[0, 2]) / self.K_new[0, 0]
         yn = (points_px[..., 1] - self.K_new[1, 2]) / self.K_new[1, 1]
-        scale = self._scale(np.hypot(xn, yn) * self.image_distance_mm)
-        return np.stack([self.K[0, 2] + self.K[0, 0] * xn * scale,
-                         self.K[1, 2] + self.K[1, 1] * yn * scale], axis=-1)
+        return np.stack(raw_from_normalised(self, xn, yn), axis=-1)
 
     def rect_from_raw(self, points_px: FloatArray) -> FloatArray:
         """
@@ -197,6 +200,12 @@ class LensModel:
         :return: ``(..., 2)`` x, y in the corrected image; NaN outside the valid field.
         """
         points_px = np.asarray(points_px, dtype=np.float64)
+        if SensorPose.from_values(self.values).tilted:
+            theta, phi = unproject_angles(self, points_px[..., 0], points_px[..., 1])
+            radius = projected(theta, self.projection)
+            return np.stack([self.K_new[0, 2] + self.K_new[0, 0] * radius * np.cos(phi),
+                             self.K_new[1, 2] + self.K_new[1, 1] * radius * np.sin(phi)],
+                            axis=-1)
         x_mm = (points_px[..., 0] - self.K[0, 2]) * self.pixel_mm[0]
         y_mm = (points_px[..., 1] - self.K[1, 2]) * self.pixel_mm[1]
         real = np.hypot(x_mm, y_mm)
@@ -207,12 +216,6 @@ class LensModel:
         yn = y_mm * ratio / self.image_distance_mm
         return np.stack([self.K_new[0, 2] + self.K_new[0, 0] * xn,
                          self.K_new[1, 2] + self.K_new[1, 1] * yn], axis=-1)
-
-    def _scale(self, ideal_mm: FloatArray) -> FloatArray:
-        """Return ``rho_real / rho_ideal`` (1 on the axis); NaN outside the valid field."""
-        real = self.curve.real_from_ideal(ideal_mm)
-        with np.errstate(invalid='ignore', divide='ignore'):
-            return np.where(ideal_mm > 0.0, real / ideal_mm, 1.0)
 
     def report(self) -> dict[str, Any]:
         """
@@ -292,23 +295,29 @@ def _image_size(values: Mapping[str, Any], width: int, height: int) -> tuple[int
     return w, h, ow, oh
 
 
-def _scale_k(boundary_ideal: FloatArray, disk: float, half_w: float, half_h: float,
-             fx: float, fy: float, alpha: float) -> float:
+def _scale_k(boundary_ideal: FloatArray, principal: tuple[float, float], disk: float,
+             size: tuple[int, int], fx: float, fy: float, alpha: float) -> float:
     """
     Choose the zoom ``k`` of ``K_new`` from the raw image outline in ideal normalised coords.
 
-    ``alpha = 0``: the output shows only valid source pixels (inner rectangle of the outline,
-    and inside the valid disk); ``alpha = 1``: every source pixel is in view (outer rectangle).
+    The outline is relative to the lens axis, which the output puts at ``principal``. The
+    output of ``size`` (w, h) reaches ``(c' + 1/2) / (k f)`` left of the axis and
+    ``(w - 1/2 - c') / (k f)`` right of it (likewise up and down). ``alpha = 0``: the output
+    shows only valid source pixels (inside the outline's inner rectangle, and its corners
+    inside the valid disk); ``alpha = 1``: every source pixel is in view (outer rectangle).
     """
     x, y = boundary_ideal[:, 0], boundary_ideal[:, 1]
     n = len(x) // 4
     top, bottom, left, right = (slice(0, n), slice(n, 2 * n), slice(2 * n, 3 * n),
                                 slice(3 * n, 4 * n))
-    inner_x = min(-np.max(x[left]), np.min(x[right]))
-    inner_y = min(-np.max(y[top]), np.min(y[bottom]))
-    k0 = max(half_w / (fx * inner_x), half_h / (fy * inner_y),
-             math.hypot(half_w / fx, half_h / fy) / disk)
-    k1 = min(half_w / (fx * np.max(np.abs(x))), half_h / (fy * np.max(np.abs(y))))
+    reach = (principal[0] + 0.5, size[0] - 0.5 - principal[0],
+             principal[1] + 0.5, size[1] - 0.5 - principal[1])
+    corner = math.hypot(max(reach[0], reach[1]) / fx, max(reach[2], reach[3]) / fy)
+    k0 = max(reach[0] / (fx * -np.max(x[left])), reach[1] / (fx * np.min(x[right])),
+             reach[2] / (fy * -np.max(y[top])), reach[3] / (fy * np.min(y[bottom])),
+             corner / disk)
+    k1 = min(reach[0] / (fx * max(np.max(-x), 1e-300)), reach[1] / (fx * max(np.max(x), 1e-300)),
+             reach[2] / (fy * max(np.max(-y), 1e-300)), reach[3] / (fy * max(np.max(y), 1e-300)))
     return float(k0 * (1.0 - alpha) + k1 * alpha)
 
 
@@ -337,25 +346,29 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
     py = float(vals['sensor.pixel_size_y_um']) * 1e-3
     refusals.check_circle_of_confusion(vals, f, w * px, h * py)
     fx, fy = v / px, v / py
-    K = np.array([[fx, 0.0, (w - 1) / 2.0], [0.0, fy, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
+    # The principal point is where the lens axis meets the sensor (sensor.axis_offset_*).
+    cx, cy = axis_pixel(vals, w, h, (px, py))
+    K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
     projection = str(vals['output.projection'])
     coarse = _trace_field(source, distance, v, half_diagonal_mm(w, h, (px, py)))
-    outline = _raw_outline(coarse, K, w, h, (px, py), projection)
-    k = _scale_k(outline.ideal, outline.disk, ow / 2.0, oh / 2.0, fx, fy,
-                 float(vals['output.alpha']))
-    K_new = np.array([[k * fx, 0.0, (ow - 1) / 2.0], [0.0, k * fy, (oh - 1) / 2.0],
-                      [0.0, 0.0, 1.0]])
+    camera = SimpleNamespace(values=vals, K=K, pixel_mm=(px, py), field_curve=coarse,
+                             source=source)
+    check_pose(vals, source, camera, w, h, sensor_z)
+    outline = _raw_outline(camera, w, h, projection)
+    K_new = _corrected_camera(outline, (ow, oh), fx, fy, float(vals['output.alpha']))
+    k, principal = K_new[0, 0] / fx, (K_new[0, 2], K_new[1, 2])
 
     # Pass 2: the dense curve in the output projection from 0 to just past the output corner
     # (and the raw image edge).
-    out_corner = math.hypot(ow / 2.0 / (k * fx), oh / 2.0 / (k * fy)) * v
-    raw_corner_ideal = float(np.nanmax(outline.ratio * outline.real)) * v
+    out_corner = math.hypot(max(principal[0] + 0.5, ow - 0.5 - principal[0]) / (k * fx),
+                            max(principal[1] + 0.5, oh - 0.5 - principal[1]) / (k * fy)) * v
+    raw_corner_ideal = float(np.nanmax(np.hypot(*outline.ideal.T))) * v
     reach = min(1.02 * max(out_corner, raw_corner_ideal), outline.disk * v * 1.001)
     curve = resample(coarse, v, reach, CURVE_SAMPLES, projection)
 
-    fits = fit_equivalent(coarse, v, K, w, h)
-    chosen = choose_equivalent(fits)
-    disp = (outline.ideal * v - outline.points_mm) / np.array([px, py])
+    fits, chosen = _equivalent(camera, v, w, h, warnings)
+    # How far the lens moves the outline from where the pinhole K puts its directions.
+    disp = outline.ideal * np.array([fx, fy]) + K[:2, 2] - outline.points
     max_disp = float(np.nanmax(np.hypot(disp[:, 0], disp[:, 1])))
 
     model = LensModel(
@@ -414,25 +427,76 @@ def _trace_field(source: LensSource, distance: float, v: float, edge_real: float
 
 @dataclass(frozen=True)
 class _Outline:
-    """The raw image's outline: where its edge points land, real and ideal (mm, normalised)."""
+    """The raw image's outline (pixels) and centre as ideal normalised coordinates."""
 
-    points_mm: FloatArray   # (N, 2) real positions on the sensor
-    real: FloatArray        # (N,) their real heights
-    ratio: FloatArray       # (N,) ideal (normalised, the output projection) / real
-    ideal: FloatArray       # (N, 2) ideal normalised positions
+    points: FloatArray      # (N, 2) raw pixels on the outer edge
+    ideal: FloatArray       # (N, 2) their directions, normalised in the output projection
+    centre: tuple[float, float]     # the raw image centre's direction, likewise
     disk: float             # the valid field's edge in the output projection (normalised)
 
 
-def _raw_outline(coarse: RadialMap, K: FloatArray, w: int, h: int, pixel_mm: tuple[float, float],
-                 projection: str) -> _Outline:
-    """Return the raw image outline in ideal normalised coordinates of the output projection."""
-    px, py = pixel_mm
+def _raw_outline(camera: Any, w: int, h: int, projection: str) -> _Outline:
+    """
+    Return the raw image's outline through the traced directions of its pixels.
+
+    The sensor's offset and tilt are included (:func:`mechdeconv_ros.model.assembly.
+    unproject_angles`); a pixel beyond the valid field takes its edge.
+    """
+    coarse = camera.field_curve
     boundary = boundary_points(w, h)
-    bx = (boundary[:, 0] - K[0, 2]) * px
-    by = (boundary[:, 1] - K[1, 2]) * py
-    b_real = np.hypot(bx, by)
-    b_theta = coarse.angle_from_real(np.minimum(b_real, coarse.valid_real_mm))
-    ratio = projected(b_theta, projection) / b_real
-    boundary_ideal = np.stack([bx * ratio, by * ratio], axis=1)
+    theta, phi = unproject_angles(camera, boundary[:, 0], boundary[:, 1])
+    theta = np.where(np.isfinite(theta), theta, coarse.max_field_angle_rad)
+    radius = projected(theta, projection)
+    ideal = np.stack([radius * np.cos(phi), radius * np.sin(phi)], axis=1)
+    c_theta, c_phi = unproject_angles(camera, np.array([(w - 1) / 2.0]),
+                                      np.array([(h - 1) / 2.0]))
+    c_radius = projected(np.nan_to_num(c_theta), projection)
+    centre = (float(c_radius[0] * np.cos(c_phi[0])), float(c_radius[0] * np.sin(c_phi[0])))
     disk = float(projected(np.array(coarse.max_field_angle_rad), projection))
-    return _Outline(np.stack([bx, by], axis=1), b_real, ratio, boundary_ideal, disk)
+    return _Outline(boundary, ideal, centre, disk)
+
+
+def _corrected_camera(outline: _Outline, size: tuple[int, int], fx: float, fy: float,
+                      alpha: float) -> FloatArray:
+    """
+    Return K_new: the zoom of ``output.alpha`` and the principal point framing the raw image.
+
+    The raw centre's direction lands near the output centre; the principal point (where the
+    lens axis projects) is rounded to half a pixel, so the maps mirror about it
+    (imaging/remap.py), and the zoom is then chosen for that point (docs/design.md s. 2.16).
+    """
+    ow, oh = size
+    middle = ((ow - 1) / 2.0, (oh - 1) / 2.0)
+    centre = outline.centre
+    k = _scale_k(outline.ideal - np.array(centre), middle, outline.disk, size, fx, fy, alpha)
+    principal = (round(2.0 * (middle[0] - k * fx * centre[0])) / 2.0,
+                 round(2.0 * (middle[1] - k * fy * centre[1])) / 2.0)
+    if principal != middle:
+        k = _scale_k(outline.ideal, principal, outline.disk, size, fx, fy, alpha)
+    return np.array([[k * fx, 0.0, principal[0]], [0.0, k * fy, principal[1]],
+                     [0.0, 0.0, 1.0]])
+
+
+def _equivalent(camera: Any, v: float, w: int, h: int,
+                warnings: list[str]) -> tuple[list[EquivalentFit], EquivalentFit]:
+    """
+    Fit camera_info's models: radially (section 2.8), or in 2-D for a tilted sensor.
+
+    A tilt no model represents within EQUIVALENT_MAX_ERROR_PX adds a warning (``info``,
+    ``/diagnostics``): the best fit is published with its error.
+    """
+    if not SensorPose.from_values(camera.values).tilted:
+        fits = fit_equivalent(camera.field_curve, v, camera.K, w, h)
+        return fits, choose_equivalent(fits)
+    # No rotational symmetry: the consumer models in two dimensions, with their tangential
+    # terms, on the traced directions of the probe pixels (model/camera_info_tilt.py).
+    probe = raw_probe_points(w, h)
+    theta, phi = unproject_angles(camera, probe[:, 0], probe[:, 1])
+    fits = fit_tilted(theta, phi, probe[:, 0], probe[:, 1], camera.K)
+    chosen = choose_equivalent(fits)
+    if chosen.max_error_px > EQUIVALENT_MAX_ERROR_PX:
+        warnings.append(f'sensor.tilt_x_deg/tilt_y_deg: no ROS distortion model represents '
+                        f'this tilt within {EQUIVALENT_MAX_ERROR_PX:g} px: camera_info carries '
+                        f'the best fit, {chosen.distortion_model}, off by up to '
+                        f'{chosen.max_error_px:.3g} px (image_rect is exact)')
+    return fits, chosen

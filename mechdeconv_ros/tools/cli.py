@@ -9,6 +9,7 @@ Commands::
     mechdeconv correct --params FILE [--bayer PATTERN] IN OUT   (an image, or a folder)
     mechdeconv plot --params FILE OUT.png
     mechdeconv camera-info --params FILE [--width W --height H]
+    mechdeconv project --params FILE [--width W --height H] IN.csv   (tx,ty -> tx,ty,u,v)
     mechdeconv vignetting --params FILE [--png OUT.png] [--lensfun]
     mechdeconv import LENS.zmx -o lens.yaml [--wavelength-nm NM]
     mechdeconv import TABLE.csv --focal-length-mm F -o lens.yaml
@@ -172,6 +173,15 @@ def format_report(report: dict[str, Any]) -> str:
         _field_line(report),
     ]
     lines += _glass_and_sensor_lines(report)
+    pose = report.get('sensor_pose')
+    if pose:
+        sigma = pose['corner_sigma_px']
+        lines.append(
+            f"sensor as assembled: lens axis at pixel ({pose['axis_px'][0]:.2f}, "
+            f"{pose['axis_px'][1]:.2f}), tilt {pose['tilt_x_deg']:g} / {pose['tilt_y_deg']:g} "
+            f"deg; corner sigma from the sensor tolerances {_num(sigma['total'])} px (offset "
+            f"x {_num(sigma['axis_offset_x_mm'])}, y {_num(sigma['axis_offset_y_mm'])}, tilt x "
+            f"{_num(sigma['tilt_x_deg'])}, y {_num(sigma['tilt_y_deg'])})")
     ri = report.get('relative_illumination')
     if ri:
         line = f"relative illumination: {ri['corner_ri']:.3f} at the raw corner"
@@ -205,6 +215,10 @@ def _glass_and_sensor_lines(report: dict[str, Any]) -> list[str]:
                      f"{sensor['defocus_mm']:+.4g} mm from the image of the scene: blur circle "
                      f"{sensor['blur_diameter_um']:.3g} um ({sensor['blur_diameter_px']:.3g} px)")
     return lines
+
+
+def _num(value: float | None) -> str:
+    return 'n/a' if value is None else f'{value:.3g}'
 
 
 def _px(value: float | None) -> str:
@@ -242,6 +256,51 @@ def cmd_camera_info(args: argparse.Namespace) -> int:
                      f'{model.equivalent_max_error_px:.3g} px over the raw image (what a '
                      'consumer rectifying with it is off by)\n')
     sys.stdout.write(camera_info_yaml(model))
+    return 0
+
+
+def read_directions(path: str) -> np.ndarray:
+    """
+    Read ``tx,ty`` lines (blank lines and ``#`` comments skipped) into an ``(N, 2)`` array.
+
+    :param path: the CSV file, ``-`` for standard input.
+    :return: the directions.
+    :raises UsageError: naming the file and line of anything else.
+    """
+    try:
+        stream = sys.stdin if path == '-' else open(path, encoding='utf-8')
+    except OSError as err:
+        raise UsageError(f'{path}: cannot read it: {err.strerror}') from None
+    rows = []
+    with stream:
+        for number, line in enumerate(stream, 1):
+            text = line.split('#', 1)[0].strip()
+            if not text:
+                continue
+            parts = [p.strip() for p in text.split(',')]
+            try:
+                if len(parts) != 2:
+                    raise ValueError
+                row = [float(parts[0]), float(parts[1])]
+            except ValueError:
+                raise UsageError(f'{path}:{number}: expected "tx,ty" (two numbers), got '
+                                 f'{text[:60]!r}') from None
+            if not all(np.isfinite(row)):
+                raise UsageError(f'{path}:{number}: tx and ty must be finite, got {text!r}')
+            rows.append(row)
+    return np.array(rows, dtype=np.float64).reshape(-1, 2)
+
+
+def cmd_project(args: argparse.Namespace) -> int:
+    """Project scene directions (tx, ty) to raw pixels (u, v): the traced camera."""
+    from mechdeconv_ros.model.assembly import project
+
+    model = _model(args)
+    directions = read_directions(args.input)
+    u, v = project(model, directions[:, 0], directions[:, 1])
+    out = sys.stdout
+    for (tx, ty), col, row in zip(directions, u, v):
+        out.write(f'{float(tx)!r},{float(ty)!r},{float(col)!r},{float(row)!r}\n')
     return 0
 
 
@@ -409,6 +468,11 @@ def build_parser() -> argparse.ArgumentParser:
     info.set_defaults(func=cmd_info)
     add('camera-info', 'print camera_calibration_parsers YAML of the raw camera',
         True).set_defaults(func=cmd_camera_info)
+    project = add('project', 'project scene directions (lines tx,ty) to raw pixels: prints '
+                             'tx,ty,u,v (nan where no chief ray passes the lens)', True)
+    project.add_argument('input', help='CSV of tx,ty (tangents X/Z, Y/Z in the optical '
+                                       'frame); - for standard input')
+    project.set_defaults(func=cmd_project)
     correct = add('correct', 'correct an image, or every image of a folder', False)
     correct.add_argument('--bayer', choices=BAYER_PATTERNS, metavar='PATTERN',
                          help='the inputs are raw Bayer mosaics with this 2x2 tile (rggb, bggr, '
