@@ -66,7 +66,7 @@ class Lens:
 
     def directions(self, u: np.ndarray, v: np.ndarray, offset_px: tuple[float, float]
                    ) -> np.ndarray:
-        """Return the unit directions (..., 3) of raw pixels; NaN outside the field."""
+        """Return the unit direction of each raw pixel, shape (..., 3); NaN outside the field."""
         a = (u - (self.width - 1) / 2.0 - offset_px[0]) * PIXEL_MM
         b = (v - (self.height - 1) / 2.0 - offset_px[1]) * PIXEL_MM
         rho = np.hypot(a, b)

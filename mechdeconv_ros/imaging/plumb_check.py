@@ -1,8 +1,7 @@
 # Copyright 2026 The mechdeconv_ros Authors.
 # SPDX-License-Identifier: Apache-2.0
 """
-The live self-check: how straight the scene's straight edges come out, and the assembly that
-straightens them best.
+The live self-check: how straight the straight edges come out; the assembly that fits best.
 
 Pure numpy and OpenCV, no ROS (docs/design.md section 2.17). The physics fixes the lens; what
 a camera as assembled adds are a few unknowns: where the axis meets the sensor
@@ -37,8 +36,8 @@ import math
 from typing import Any, Mapping
 
 from mechdeconv_ros.imaging.plumb_lines import (
-    ChiefLines, edge_index, field_coverage, great_circles, output_focal_px, straight_edges,
-    straightness_px)
+    ChiefLines, edge_index, field_coverage, great_circles, MIN_EDGE_POINTS, output_focal_px,
+    straight_edges, straightness_px)
 from mechdeconv_ros.imaging.straight_edges import detect_chains, Points, sample_map
 from mechdeconv_ros.optics.prescription import vertex_z
 import numpy as np
@@ -60,8 +59,11 @@ MIN_EDGES = 4
 MIN_COVERAGE = 0.05
 #: Robust refit: an edge whose RMS after the fit exceeds REJECT_FACTOR x the median edge RMS
 #: and REJECT_FLOOR_PX is not a straight line of the scene.
-REJECT_FACTOR = 4.0
+REJECT_FACTOR = 3.0
 REJECT_FLOOR_PX = 0.3
+#: The verdict is also ``description_off`` when an estimate differs from the description by
+#: more than OFF_SIGMAS of its sigma and one tolerance.
+OFF_SIGMAS = 3.0
 #: Levenberg-Marquardt iterations.
 LM_ITERATIONS = 25
 VERDICTS = ('ok', 'description_off', 'not_enough_edges')
@@ -185,12 +187,30 @@ class _Problem:
         return np.sqrt(np.bincount(self.index, r * r, self.count) / n)
 
     def keep_straight(self, x: npt.NDArray[np.float64]) -> bool:
-        """Drop the edges that stay curved under x; return True if any went."""
+        """
+        Drop the points off their lines and the edges that stay curved under x.
+
+        A point is off when ``|r|`` exceeds ``REJECT_FACTOR`` robust sigmas (1.4826 x the
+        median ``|r|``) and ``REJECT_FLOOR_PX``; an edge is curved when its RMS exceeds
+        ``REJECT_FACTOR`` x the median edge RMS and ``REJECT_FLOOR_PX``.
+
+        :param x: the free pose components.
+        :return: True when anything was dropped.
+        """
+        r = np.abs(self.residuals(x))
+        point_ok = r <= max(REJECT_FACTOR * 1.4826 * float(np.median(r)), REJECT_FLOOR_PX)
         rms = self.edge_rms(x)
-        keep = rms <= max(REJECT_FACTOR * float(np.median(rms)), REJECT_FLOOR_PX)
-        if keep.all() or np.count_nonzero(keep) < MIN_EDGES:
+        edge_ok = rms <= max(REJECT_FACTOR * float(np.median(rms)), REJECT_FLOOR_PX)
+        keep = point_ok & edge_ok[self.index]
+        if keep.all():
             return False
-        self.set_edges([e for e, k in zip(self.edges, keep) if k])
+        edges = [p[k] for p, k in zip(np.split(self.points, np.cumsum(
+            np.bincount(self.index, minlength=self.count))[:-1]),
+            np.split(keep, np.cumsum(np.bincount(self.index, minlength=self.count))[:-1]))]
+        edges = [e for e in edges if e.shape[0] >= MIN_EDGE_POINTS]
+        if len(edges) < MIN_EDGES:
+            return False
+        self.set_edges(edges)
         return True
 
     def jacobian(self, x: npt.NDArray[np.float64], r: npt.NDArray[np.float64],
@@ -274,8 +294,11 @@ def check_chains(model: Any, chains: list[Points], max_rms_px: float,
         scale = tol[free]
         lo, hi = x - BOUND_SIGMAS * scale, x + BOUND_SIGMAS * scale
         x = _levenberg_marquardt(problem, x, lo, hi, scale)
-        # Robust refit without the edges that stay curved (circles, arcs, bent objects).
-        if problem.keep_straight(x):
+        # Robust refits without the points off their lines and the edges that stay curved
+        # (circles, arcs, bent objects, crowded edges).
+        for _ in range(2):
+            if not problem.keep_straight(x):
+                break
             x = _levenberg_marquardt(problem, x, lo, hi, scale)
     elif enough:
         problem.keep_straight(x)
@@ -302,7 +325,17 @@ def check_chains(model: Any, chains: list[Points], max_rms_px: float,
                                  'tolerance': float(tol[k])}
     after = _straightness(model, lines, problem, pose)
     result.straightness_rms_px_after, result.straightness_max_px_after = after[0], after[1]
+    if any(abs(est['value'] - float(est_base)) > max(OFF_SIGMAS * est['sigma'],
+                                                     est['tolerance'])
+           for est, est_base in zip(result.estimate.values(), _bases(model, free, base_d))):
+        result.verdict = 'description_off'
     return result
+
+
+def _bases(model: Any, free: npt.NDArray[np.int64], base_d: float) -> list[float]:
+    """Return the description's value of each free parameter."""
+    pose0 = nominal_pose(model)
+    return [float(pose0[k]) if k < 4 else base_d for k in free]
 
 
 def _straightness(model: Any, lines: ChiefLines, problem: _Problem,
@@ -327,7 +360,8 @@ def check_images(model: Any, images: list[np.ndarray], max_rms_px: float,
     return check_chains(model, raw_chains(images), max_rms_px, estimate)
 
 
-def to_apply(result: CheckResult, values: Mapping[str, Any]) -> dict[str, float]:
+def to_apply(result: CheckResult, values: Mapping[str, Any],
+             reference: Mapping[str, Any] | None = None) -> dict[str, float]:
     """
     Return the parameters ``check.apply`` may set: estimated within their tolerance.
 
@@ -336,6 +370,8 @@ def to_apply(result: CheckResult, values: Mapping[str, Any]) -> dict[str, float]
 
     :param result: a check with an estimate.
     :param values: the current parameter values.
+    :param reference: the values the bounds are about (default ``values``): a node passes
+        its start-up values, so repeated sets never walk away from the description.
     :return: name -> value (empty when nothing qualifies).
     """
     if result.verdict != 'description_off':
@@ -347,8 +383,8 @@ def to_apply(result: CheckResult, values: Mapping[str, Any]) -> dict[str, float]
             continue
         current = float(values.get(name, 0.0))
         if name == 'lens.image_distance_mm' and current <= 0.0:
-            continue
-        value = float(np.clip(est['value'], current - BOUND_SIGMAS * tol,
-                              current + BOUND_SIGMAS * tol))
-        out[name] = value
+            continue        # the paraxial image plane stays a choice of the user
+        centre = float((reference or values).get(name, current))
+        out[name] = float(np.clip(est['value'], centre - BOUND_SIGMAS * tol,
+                                  centre + BOUND_SIGMAS * tol))
     return out

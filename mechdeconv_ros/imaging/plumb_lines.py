@@ -126,8 +126,10 @@ class ChiefLines:
 
     def raw_scale(self, dirs: Points) -> Points:
         """
-        Return raw px per rad of the directions' neighbourhoods (isotropic: the geometric mean
-        of the radial ``dh / dtheta`` and the tangential ``h / sin theta`` scales).
+        Return raw px per rad around directions.
+
+        Isotropic: the geometric mean of the radial ``dh / dtheta`` and the tangential
+        ``h / sin theta`` scales.
 
         :param dirs: ``(N, 3)`` unit directions.
         :return: ``(N,)`` px / rad; NaN outside the field.

@@ -10,9 +10,10 @@ Pure OpenCV and numpy, no ROS. Works on any single frame (raw or corrected); the
    differentiated by 3x3 Sobel kernels (gx, gy); Canny (L2 gradient, hysteresis
    ``CANNY_LOW`` / ``CANNY_HIGH`` in Sobel units, i.e. 8x the grey step per pixel of the
    smoothed frame) keeps the one-pixel-wide ridge of the gradient magnitude ``g``.
-2. Sub-pixel position: across the edge along the axis nearer to the gradient (x when
-   ``|gx| >= |gy|``), the parabola through ``g`` at the pixel and its two neighbours has its
-   vertex at ``d = (g- - g+) / (2 (g- - 2 g0 + g+))``, ``|d| <= 0.5`` (Devernay 1995).
+2. Sub-pixel position: along the unit gradient ``n`` the parabola through ``g`` at the
+   pixel and one pixel either side (bilinear samples) has its vertex at
+   ``d = (g- - g+) / (2 (g- - 2 g0 + g+))``, ``|d| <= 0.5``; the point is ``p + d n``
+   (Devernay 1995, along the gradient rather than the nearer axis).
 3. Chains: a ridge pixel whose 8-neighbourhood holds three or more separate runs of ridge
    pixels (the crossing number) is a junction (a T, an X) and is dropped with its
    neighbours; the rest are split into 8-connected components, each a simple curve. The
@@ -34,6 +35,11 @@ EDGE_SIGMA_PX = 1.0
 #: Canny hysteresis thresholds on the L2 Sobel gradient (3x3 kernel: 8 x grey step / px).
 CANNY_LOW = 24.0
 CANNY_HIGH = 64.0
+#: Grey level (8-bit range) below which a pixel is black: outside the image circle or the
+#: corrected field. Ridges near black are its border, not the scene's.
+DARK_LEVEL = 6.0
+#: Points dropped at each end of a chain (rounded corners where it met a junction).
+TRIM_POINTS = 4
 #: A chain shorter than this many ridge pixels is dropped (too short to tell a curve).
 MIN_CHAIN_POINTS = 24
 
@@ -75,10 +81,13 @@ def detect_chains(image: np.ndarray, valid: npt.NDArray[np.bool_] | None = None
 
     :param image: the frame (see :func:`grey`).
     :param valid: optional mask of the pixels that hold image (False: black outside the
-        image circle or the corrected field); ridges within 2 px of its border are dropped.
+        image circle or the corrected field); ridges within 4 px of its border, or of a
+        black (below ``DARK_LEVEL``) region, are dropped.
     :return: the chains with at least ``MIN_CHAIN_POINTS`` points.
     """
     g = cv2.GaussianBlur(grey(image), (0, 0), EDGE_SIGMA_PX)
+    lit = g > DARK_LEVEL
+    valid = lit if valid is None else (valid & lit)
     gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3)
     gy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3)
     ridge = cv2.Canny(np.clip(np.rint(gx), -32767, 32767).astype(np.int16),
@@ -89,9 +98,7 @@ def detect_chains(image: np.ndarray, valid: npt.NDArray[np.bool_] | None = None
     ridge[-2:, :] = 0
     ridge[:, :2] = 0
     ridge[:, -2:] = 0
-    if valid is not None:
-        inside = cv2.erode(valid.astype(np.uint8), np.ones((7, 7), np.uint8))
-        ridge &= inside
+    ridge &= cv2.erode(valid.astype(np.uint8), np.ones((9, 9), np.uint8))
     junction = (_crossing_number(ridge) >= 3) & (ridge > 0)
     if junction.any():
         ridge[cv2.dilate(junction.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0] = 0
@@ -101,29 +108,38 @@ def detect_chains(image: np.ndarray, valid: npt.NDArray[np.bool_] | None = None
     rows, cols = np.nonzero(labels)
     lab = labels[rows, cols]
     mag = np.hypot(gx, gy)
-    # Sub-pixel offset across the edge, along the axis nearer to the gradient.
-    horizontal = np.abs(gx[rows, cols]) >= np.abs(gy[rows, cols])
-    dr = np.where(horizontal, 0, 1)
-    dc = 1 - dr
-    g_minus = mag[rows - dr, cols - dc]
-    g_zero = mag[rows, cols]
-    g_plus = mag[rows + dr, cols + dc]
+    # Sub-pixel offset along the unit gradient n: the parabola through g(p - n), g(p),
+    # g(p + n) (bilinear samples).
+    g_zero = mag[rows, cols].astype(np.float64)
+    nx = gx[rows, cols] / np.maximum(g_zero, 1e-9)
+    ny = gy[rows, cols] / np.maximum(g_zero, 1e-9)
+    g_minus = _bilinear(mag, cols - nx, rows - ny)
+    g_plus = _bilinear(mag, cols + nx, rows + ny)
     curvature = g_minus - 2.0 * g_zero + g_plus
     with np.errstate(invalid='ignore', divide='ignore'):
         offset = np.where(curvature < 0.0, 0.5 * (g_minus - g_plus) / curvature, 0.0)
     offset = np.clip(offset, -0.5, 0.5)
-    x = cols + offset * dc
-    y = rows + offset * dr
+    x = cols + offset * nx
+    y = rows + offset * ny
     order = np.argsort(lab, kind='stable')
     lab, x, y = lab[order], x[order], y[order]
     bounds = np.flatnonzero(np.diff(lab)) + 1
     chains = []
     for xs, ys in zip(np.split(x, bounds), np.split(y, bounds)):
-        if xs.size < MIN_CHAIN_POINTS:
+        if xs.size < MIN_CHAIN_POINTS + 2 * TRIM_POINTS:
             continue
         pts = np.stack([xs, ys], axis=1).astype(np.float64)
-        chains.append(order_along(pts))
+        chains.append(order_along(pts)[TRIM_POINTS:-TRIM_POINTS])
     return chains
+
+
+def _bilinear(img: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Sample an image bilinearly at (x, y) (inside by at least one pixel)."""
+    x0 = np.floor(x).astype(np.int64)
+    y0 = np.floor(y).astype(np.int64)
+    fx, fy = x - x0, y - y0
+    return ((1 - fx) * (1 - fy) * img[y0, x0] + fx * (1 - fy) * img[y0, x0 + 1]
+            + (1 - fx) * fy * img[y0 + 1, x0] + fx * fy * img[y0 + 1, x0 + 1])
 
 
 def order_along(points: Points) -> Points:

@@ -56,6 +56,8 @@ class FrameStats:
         self.decode_count = 0           # since the last diagnostics message
         #: More entries for /diagnostics (the lens_state input's, lens_follower.py).
         self.extra: dict[str, Any] = {}
+        #: The last straight-edge check (check_thread.py), replaced whole by its thread.
+        self.check: dict[str, Any] = {}
 
     def add_decode_time(self, ms: float) -> None:
         """Record the decoding time of one compressed frame."""
@@ -136,6 +138,8 @@ def diagnostics_message(node: Node, live: LiveStatus, stats: FrameStats,
                         'decode_time_ms_max': decode_max,
                         'decode_time_ms_last': stats.decode_ms_last})
     entries.update(stats.extra)
+    check = stats.check
+    entries.update(check)
     status = DiagnosticStatus(name=status_name(node), hardware_id='')
     warnings: list[str] = []
     summary_pending = live.active is not None and live.report is None
@@ -155,7 +159,11 @@ def diagnostics_message(node: Node, live: LiveStatus, stats: FrameStats,
     elif live.active is None:
         status.level = DiagnosticStatus.OK
         status.message = 'waiting for the first frame'
-    elif warnings:
+    elif warnings or check.get('verdict') == 'description_off':
+        if check.get('verdict') == 'description_off':
+            warnings.append('check: description_off: straight edges come out '
+                            f"{_text(check.get('straightness_rms_px'))} px rms from straight "
+                            '(see estimate.*)')
         status.level = DiagnosticStatus.WARN
         status.message = '; '.join(warnings)
     elif stats.last_error and period_frames == 0 and stats.frames_in > stats.frames_out:
