@@ -65,7 +65,7 @@ REJECT_FLOOR_PX = 0.3
 #: more than OFF_SIGMAS of its sigma and one tolerance.
 OFF_SIGMAS = 3.0
 #: Levenberg-Marquardt iterations.
-LM_ITERATIONS = 25
+LM_ITERATIONS = 20
 VERDICTS = ('ok', 'description_off', 'not_enough_edges')
 
 
@@ -177,7 +177,7 @@ class _Problem:
     def residuals(self, x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         dirs = self.lines.directions(self.points, self.pose(x))
         good = np.all(np.isfinite(dirs), axis=1)
-        dirs[~good] = (0.0, 0.0, 1.0)
+        dirs[~good] = 0.0       # no weight in the fit, zero residual
         _, res = great_circles(dirs, self.index, self.count)
         return np.where(good, res, 0.0) * self.weight
 
@@ -186,7 +186,8 @@ class _Problem:
         n = np.maximum(np.bincount(self.index, minlength=self.count), 1)
         return np.sqrt(np.bincount(self.index, r * r, self.count) / n)
 
-    def keep_straight(self, x: npt.NDArray[np.float64]) -> bool:
+    def keep_straight(self, x: npt.NDArray[np.float64], factor: float = REJECT_FACTOR,
+                      whole_edges: bool = True) -> bool:
         """
         Drop the points off their lines and the edges that stay curved under x.
 
@@ -195,12 +196,16 @@ class _Problem:
         ``REJECT_FACTOR`` x the median edge RMS and ``REJECT_FLOOR_PX``.
 
         :param x: the free pose components.
+        :param factor: ``REJECT_FACTOR`` or a more lenient one.
+        :param whole_edges: False keeps every edge (only points go).
         :return: True when anything was dropped.
         """
         r = np.abs(self.residuals(x))
-        point_ok = r <= max(REJECT_FACTOR * 1.4826 * float(np.median(r)), REJECT_FLOOR_PX)
+        point_ok = r <= max(factor * 1.4826 * float(np.median(r)), REJECT_FLOOR_PX)
         rms = self.edge_rms(x)
-        edge_ok = rms <= max(REJECT_FACTOR * float(np.median(rms)), REJECT_FLOOR_PX)
+        edge_ok = rms <= max(factor * float(np.median(rms)), REJECT_FLOOR_PX)
+        if not whole_edges:
+            edge_ok[:] = True
         keep = point_ok & edge_ok[self.index]
         if keep.all():
             return False
@@ -242,7 +247,9 @@ def _levenberg_marquardt(problem: _Problem, x0: npt.NDArray[np.float64],
             rn = problem.residuals(xn)
             cost_n = float(rn @ rn)
             if cost_n < cost:
-                improved = abs(cost - cost_n) > 1e-10 * cost
+                # Done when the cost stalls or the step is a thousandth of a tolerance.
+                improved = (cost - cost_n > 1e-7 * cost
+                            and float(np.max(np.abs(xn - x) / scale)) > 1e-3)
                 x, r, cost = xn, rn, cost_n
                 lam = max(lam / 10.0, 1e-9)
                 break
@@ -293,6 +300,9 @@ def check_chains(model: Any, chains: list[Points], max_rms_px: float,
     if enough and free.size:
         scale = tol[free]
         lo, hi = x - BOUND_SIGMAS * scale, x + BOUND_SIGMAS * scale
+        # Gross outliers first (junction remnants, crowded edges): a description that is
+        # off bends every edge smoothly and a little, these by pixels.
+        problem.keep_straight(x, 2.0 * REJECT_FACTOR, whole_edges=False)
         x = _levenberg_marquardt(problem, x, lo, hi, scale)
         # Robust refits without the points off their lines and the edges that stay curved
         # (circles, arcs, bent objects, crowded edges).
