@@ -64,6 +64,8 @@ REJECT_FLOOR_PX = 0.3
 #: The verdict is also ``description_off`` when an estimate differs from the description by
 #: more than OFF_SIGMAS of its sigma and one tolerance.
 OFF_SIGMAS = 3.0
+#: ... or when the estimate straightens the edges by more than this factor (RMS).
+OFF_RATIO = 1.2
 #: Levenberg-Marquardt iterations.
 LM_ITERATIONS = 20
 VERDICTS = ('ok', 'description_off', 'not_enough_edges')
@@ -335,7 +337,7 @@ def check_chains(model: Any, chains: list[Points], max_rms_px: float,
                                  'tolerance': float(tol[k])}
     after = _straightness(model, lines, problem, pose)
     result.straightness_rms_px_after, result.straightness_max_px_after = after[0], after[1]
-    if any(abs(est['value'] - float(est_base)) > max(OFF_SIGMAS * est['sigma'],
+    if after[0] * OFF_RATIO < rms or any(abs(est['value'] - float(est_base)) > max(OFF_SIGMAS * est['sigma'],
                                                      est['tolerance'])
            for est, est_base in zip(result.estimate.values(), _bases(model, free, base_d))):
         result.verdict = 'description_off'

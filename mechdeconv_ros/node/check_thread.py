@@ -3,7 +3,8 @@
 """
 The node's live self-check: a low-priority thread off the frame path (issue 26).
 
-At most ``check.rate_hz`` times a second (0 = off) the frame callback hands over a COPY of a
+At most ``check.rate_hz`` times a second, counted from the end of the last check (0 = off),
+the frame callback hands over a COPY of a
 corrected frame with the model that made it (:meth:`CheckThread.offer`: a dict swap and one
 ``np.copy``, nothing else on the frame path). The thread, at nice 19 on Linux, detects the
 edge chains of that frame, carries them to raw pixels through the same model's float maps
@@ -11,7 +12,8 @@ edge chains of that frame, carries them to raw pixels through the same model's f
 ``check.window`` frames, and runs :func:`~mechdeconv_ros.imaging.plumb_check.check_chains`
 with the node's current model. The result goes to ``/diagnostics`` under the keys of
 :meth:`~mechdeconv_ros.imaging.plumb_check.CheckResult.as_dict` (``estimate.<name>.value``
-and ``.sigma``), with ``check_ms_last`` (the thread's time) and ``check_frames``.
+and ``.sigma``), with ``check_ms_last`` (the thread's time), ``check_frames`` (in the window), ``checks``
+(done since start) and ``check_applied`` (sets made).
 
 ``check.apply``: when the verdict is ``description_off`` and a parameter's sigma is within
 its tolerance, the thread sets the estimated parameters on the node in ONE
@@ -128,6 +130,9 @@ class CheckThread:
                 self._node.get_logger().error(f'check failed: {err!r}',
                                               throttle_duration_sec=60.0)
             finally:
+                # The period runs from the end of a check: the thread idles at least
+                # 1 / check.rate_hz between checks, however long one takes.
+                self._last_offer = time.monotonic()
                 self._busy = False
 
     def _check(self, frame: np.ndarray, model: Any) -> None:
@@ -147,6 +152,7 @@ class CheckThread:
         self.checks += 1
         entries = diagnostics_entries(result)
         entries['check_frames'] = len(self._window)
+        entries['checks'] = self.checks
         entries['check_ms_last'] = (time.perf_counter() - start) * 1e3
         entries['check_applied'] = self.applied
         self._publish(entries)
