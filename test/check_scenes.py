@@ -184,6 +184,23 @@ def box_room(lens: Lens, offset_px: tuple[float, float], yaw: float = 20.0,
     return _finish(img, d)
 
 
+def discs(lens: Lens, offset_px: tuple[float, float], seed: int = 3) -> np.ndarray:
+    """Render dark discs (circles seen from their axis: cones of directions), no lines."""
+    u, v = np.meshgrid(np.arange(lens.width, dtype=float), np.arange(lens.height, dtype=float))
+    d = lens.directions(u, v, offset_px)
+    rng = np.random.default_rng(seed)
+    img = np.full(u.shape, 0.75)
+    for _ in range(14):
+        theta, phi = rng.uniform(0.0, 1.3), rng.uniform(-math.pi, math.pi)
+        centre = np.array([math.sin(theta) * math.cos(phi), math.sin(theta) * math.sin(phi),
+                           math.cos(theta)])
+        angle = np.arccos(np.clip(np.nan_to_num(d @ centre), -1.0, 1.0))
+        foot = np.maximum(np.hypot(*np.gradient(angle)), 1e-9)
+        cover = np.clip(0.5 + (rng.uniform(0.08, 0.3) - angle) / foot, 0.0, 1.0)
+        img = img * (1 - cover) + 0.25 * cover
+    return _finish(img, d)
+
+
 def featureless(lens: Lens, noise: float = 6.0, seed: int = 1) -> np.ndarray:
     """Return a flat frame with Gaussian noise (grey levels)."""
     rng = np.random.default_rng(seed)

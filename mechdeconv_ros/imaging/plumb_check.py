@@ -22,7 +22,9 @@ Uncertainty: the larger of the classical ``s^2 (J^T J)^-1`` and the edge-cluster
 ``(J^T J)^-1 (sum_e g_e g_e^T) (J^T J)^-1`` (``g_e = J_e^T r_e``), which does not believe
 that the points along one edge err independently. A direction the edges cannot see (a tilt
 in a low-distortion lens: a homography keeps lines straight) has a near-zero eigenvalue of
-``J^T J`` and so a large sigma (capped at ``SIGMA_CAP`` tolerances), not a confident value.
+``J^T J`` and so a large sigma (capped at ``SIGMA_CAP`` tolerances), not a confident value:
+a parameter whose sigma exceeds its tolerance is reported at the description's value with
+that sigma, and the others are refitted with it held there.
 
 Verdict: ``not_enough_edges`` under ``MIN_EDGES`` edges or ``MIN_COVERAGE`` of the field (no
 estimate is made); else ``description_off`` when the RMS straightness with the description
@@ -328,6 +330,18 @@ def check_chains(model: Any, chains: list[Points], max_rms_px: float,
     if free.size == 0:
         return result
     sigma = _sigma(problem, x, tol[free])
+    # What the edges do not see is held at the description (its sigma stays the full fit's),
+    # and the rest is refitted without it: an unseen tilt at its bound would drag the offset.
+    seen = sigma <= tol[free]
+    if seen.any() and not seen.all():
+        full_sigma = sigma
+        reduced = _Problem(lines, problem.edges, pose0, free[seen])
+        xs = _levenberg_marquardt(reduced, pose0[free[seen]], lo[seen], hi[seen],
+                                  tol[free[seen]])
+        x = pose0[free].copy()
+        x[seen] = xs
+        sigma = full_sigma.copy()
+        sigma[seen] = _sigma(reduced, xs, tol[free[seen]])
     pose = problem.pose(x)
     base_d = image_distance_base(model)
     for j, k in enumerate(free):
