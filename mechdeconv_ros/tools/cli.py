@@ -33,9 +33,11 @@ from pathlib import Path
 import sys
 from typing import Any, Sequence
 
+from mechdeconv_ros.lenses.lens_source import LensSource
 from mechdeconv_ros.lenses.lens_table import mechanisms, parse_lens_state
-from mechdeconv_ros.lenses.moving_source import MovingSource
-from mechdeconv_ros.model.model import build_model, camera_info_yaml, LensModel, ModelError
+from mechdeconv_ros.lenses.sources import source_for
+from mechdeconv_ros.model.camera_yaml import camera_info_yaml
+from mechdeconv_ros.model.model import build_model, LensModel, ModelError
 from mechdeconv_ros.schema.params import BAYER_PATTERNS, check_values, load_params_file, SPECS
 import numpy as np
 import yaml
@@ -85,7 +87,7 @@ def _model(args: argparse.Namespace, width: int = 0, height: int = 0) -> LensMod
     return model
 
 
-def _moving_source(args: argparse.Namespace, values: dict[str, Any]) -> MovingSource | None:
+def _moving_source(args: argparse.Namespace, values: dict[str, Any]) -> LensSource | None:
     """Return the lens at ``--lens-state`` (None without the option: the default source)."""
     text = getattr(args, 'lens_state', None)
     if not text:
@@ -103,7 +105,7 @@ def _moving_source(args: argparse.Namespace, values: dict[str, Any]) -> MovingSo
             _warn_once(args, [f'lens.{name}: joint position {position:g} is outside '
                               f'lens.{name}.positions ({mech.positions[0]:g} to '
                               f'{mech.positions[-1]:g}): the nearest row is used'])
-    return MovingSource(values, state)
+    return source_for(values, state)
 
 
 def _warn_once(args: argparse.Namespace, warnings: Sequence[str]) -> None:
@@ -172,6 +174,15 @@ def format_report(report: dict[str, Any]) -> str:
         _field_line(report),
     ]
     lines += _glass_and_sensor_lines(report)
+    pose = report.get('sensor_pose')
+    if pose:
+        sigma = pose['corner_sigma_px']
+        lines.append(
+            f"sensor as assembled: lens axis at pixel ({pose['axis_px'][0]:.2f}, "
+            f"{pose['axis_px'][1]:.2f}), tilt {pose['tilt_x_deg']:g} / {pose['tilt_y_deg']:g} "
+            f"deg; corner sigma from the sensor tolerances {_num(sigma['total'])} px (offset "
+            f"x {_num(sigma['axis_offset_x_mm'])}, y {_num(sigma['axis_offset_y_mm'])}, tilt x "
+            f"{_num(sigma['tilt_x_deg'])}, y {_num(sigma['tilt_y_deg'])})")
     ri = report.get('relative_illumination')
     if ri:
         line = f"relative illumination: {ri['corner_ri']:.3f} at the raw corner"
@@ -205,6 +216,10 @@ def _glass_and_sensor_lines(report: dict[str, Any]) -> list[str]:
                      f"{sensor['defocus_mm']:+.4g} mm from the image of the scene: blur circle "
                      f"{sensor['blur_diameter_um']:.3g} um ({sensor['blur_diameter_px']:.3g} px)")
     return lines
+
+
+def _num(value: float | None) -> str:
+    return 'n/a' if value is None else f'{value:.3g}'
 
 
 def _px(value: float | None) -> str:
@@ -281,8 +296,8 @@ def cmd_project(args: argparse.Namespace) -> int:
     """Project scene directions (tx, ty) to raw pixels (u, v): the traced camera."""
     from mechdeconv_ros.model.assembly import project
 
-    directions = read_directions(args.input)
     model = _model(args)
+    directions = read_directions(args.input)
     u, v = project(model, directions[:, 0], directions[:, 1])
     out = sys.stdout
     for (tx, ty), col, row in zip(directions, u, v):
@@ -402,7 +417,8 @@ def cmd_vignetting(args: argparse.Namespace) -> int:
 
 def cmd_import(args: argparse.Namespace) -> int:
     """Import a .zmx lens file or a datasheet CSV table into a params file."""
-    from mechdeconv_ros.lenses.lens_import import import_zmx, params_text, write_atomically
+    from mechdeconv_ros.lenses.lens_import import import_zmx
+    from mechdeconv_ros.lenses.params_file import params_text, write_atomically
     from mechdeconv_ros.lenses.zmx import LensImportError
 
     source = Path(args.lens)
