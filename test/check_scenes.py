@@ -185,7 +185,7 @@ def box_room(lens: Lens, offset_px: tuple[float, float], yaw: float = 20.0,
 
 
 def discs(lens: Lens, offset_px: tuple[float, float], seed: int = 3) -> np.ndarray:
-    """Render dark discs (circles seen from their axis: cones of directions), no lines."""
+    """Render dark circular spots, cones of directions seen along their axes; no lines."""
     u, v = np.meshgrid(np.arange(lens.width, dtype=float), np.arange(lens.height, dtype=float))
     d = lens.directions(u, v, offset_px)
     rng = np.random.default_rng(seed)

@@ -351,9 +351,9 @@ def check_chains(model: Any, chains: list[Points], max_rms_px: float,
                                  'tolerance': float(tol[k])}
     after = _straightness(model, lines, problem, pose)
     result.straightness_rms_px_after, result.straightness_max_px_after = after[0], after[1]
-    if after[0] * OFF_RATIO < rms or any(abs(est['value'] - float(est_base)) > max(OFF_SIGMAS * est['sigma'],
-                                                     est['tolerance'])
-           for est, est_base in zip(result.estimate.values(), _bases(model, free, base_d))):
+    moved = [abs(est['value'] - base) > max(OFF_SIGMAS * est['sigma'], est['tolerance'])
+             for est, base in zip(result.estimate.values(), _bases(model, free, base_d))]
+    if after[0] * OFF_RATIO < rms or any(moved):
         result.verdict = 'description_off'
     return result
 

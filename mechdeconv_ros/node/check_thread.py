@@ -12,8 +12,8 @@ edge chains of that frame, carries them to raw pixels through the same model's f
 ``check.window`` frames, and runs :func:`~mechdeconv_ros.imaging.plumb_check.check_chains`
 with the node's current model. The result goes to ``/diagnostics`` under the keys of
 :meth:`~mechdeconv_ros.imaging.plumb_check.CheckResult.as_dict` (``estimate.<name>.value``
-and ``.sigma``), with ``check_ms_last`` (the thread's time), ``check_frames`` (in the window), ``checks``
-(done since start) and ``check_applied`` (sets made).
+and ``.sigma``), with ``check_ms_last`` (the thread's time), ``check_frames`` (in the
+window), ``checks`` (done since start) and ``check_applied`` (sets made).
 
 ``check.apply``: when the verdict is ``description_off`` and a parameter's sigma is within
 its tolerance, the thread sets the estimated parameters on the node in ONE

@@ -158,8 +158,7 @@ def diagnostics_message(node: Node, live: LiveStatus, stats: FrameStats,
                         'decode_time_ms_max': decode_max,
                         'decode_time_ms_last': stats.decode_ms_last})
     entries.update(stats.extra)
-    check = stats.check
-    entries.update(check)
+    entries.update(stats.check)
     status = DiagnosticStatus(name=status_name(node), hardware_id='')
     warnings: list[str] = []
     summary_pending = live.active is not None and live.report is None
@@ -179,11 +178,8 @@ def diagnostics_message(node: Node, live: LiveStatus, stats: FrameStats,
     elif live.active is None:
         status.level = DiagnosticStatus.OK
         status.message = 'waiting for the first frame'
-    elif warnings or check.get('verdict') == 'description_off':
-        if check.get('verdict') == 'description_off':
-            warnings.append('check: description_off: straight edges come out '
-                            f"{_text(check.get('straightness_rms_px'))} px rms from straight "
-                            '(see estimate.*)')
+    elif warnings + _check_warning(stats.check):
+        warnings += _check_warning(stats.check)
         status.level = DiagnosticStatus.WARN
         status.message = '; '.join(warnings)
     elif stats.last_error and period_frames == 0 and stats.frames_in > stats.frames_out:
@@ -199,6 +195,14 @@ def diagnostics_message(node: Node, live: LiveStatus, stats: FrameStats,
     array.header.stamp = node.get_clock().now().to_msg()
     array.status = [status]
     return array
+
+
+def _check_warning(check: Mapping[str, Any]) -> list[str]:
+    """Return the straight-edge check's warning, if its verdict is description_off."""
+    if check.get('verdict') != 'description_off':
+        return []
+    return ['check: description_off: straight edges come out '
+            f"{_text(check.get('straightness_rms_px'))} px rms from straight (see estimate.*)"]
 
 
 #: Curves of the model report that /diagnostics leaves out (the scalars stay: e.g.
