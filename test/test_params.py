@@ -57,6 +57,10 @@ def test_issue_contract_names_are_declared():
                                          'tilt_y_deg')]
     contract += [f'sensor.tolerance.{k}' for k in ('axis_offset_x_mm', 'axis_offset_y_mm',
                                                    'tilt_x_deg', 'tilt_y_deg')]
+    # Issue 26: the straight-edge check (its check.* are node parameters: no model change).
+    contract += ['lens.tolerance.image_distance_mm']
+    for name in ('check.rate_hz', 'check.window', 'check.max_rms_px', 'check.apply'):
+        assert name in params.SPECS and name not in params.MODEL_PARAMS
     assert set(contract) <= set(params.SPECS)
     assert set(contract) == set(params.MODEL_PARAMS)
 

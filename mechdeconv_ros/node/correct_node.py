@@ -61,6 +61,7 @@ from mechdeconv_ros.imaging.model_maps import ModelMaps
 from mechdeconv_ros.imaging.moving_maps import MovingRectifier
 from mechdeconv_ros.imaging.remap import set_remap_threads
 from mechdeconv_ros.model.lateral_color import COLOUR_ORDER
+from mechdeconv_ros.node.check_thread import CheckThread
 from mechdeconv_ros.node.diagnostics import diagnostics_message, FrameStats
 from mechdeconv_ros.node.frame_input import (
     compressed_output, COMPRESSED_PARAMS, compressed_settings, demosaic_frame, FrameRefused)
@@ -123,6 +124,8 @@ class CorrectNode(Node):
         self._pub_diag, self._outputs, events = create_outputs(self, self._update_subscription)
         self._pub_image, self._pub_info, self._pub_info_rect, self._pub_compressed = \
             self._outputs
+        self._check = CheckThread(self, self._live.value, self._active_model, self._set_check)
+        self._check.start()
         self._rebuild_trigger = self.create_guard_condition(self._live.start_requested_rebuild)
         self._live.start()
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -236,6 +239,8 @@ class CorrectNode(Node):
             self._pub_info_rect.publish(info_rect)
             if clock is not None:
                 clock.mark('publish_info_rect')
+            if not isinstance(active.rectifier, MovingRectifier):
+                self._check.offer(out.pixels, model)    # a copy, at most check.rate_hz
             self._maps.frame_done(active.rectifier, encoding.name,
                                   1 if pixels.ndim == 2 else int(pixels.shape[2]), colours,
                                   bool(encoding.depth))
@@ -257,6 +262,14 @@ class CorrectNode(Node):
         if clock is not None:
             clock.mark('bookkeeping')
 
+    def _active_model(self) -> Any:
+        """Return the model frames are corrected with now (None before the first frame)."""
+        active = self._live.status().active
+        return None if active is None else active.model
+
+    def _set_check(self, entries: dict[str, Any]) -> None:
+        self._stats.check = entries     # one rebinding: the diagnostics timer reads it whole
+
     def _frame_error(self, kind: str, error: str, line: str = '') -> None:
         """Record a problem for diagnostics; log it at most every LOG_THROTTLE_S per kind."""
         if self._stats.record_error(kind, error, LOG_THROTTLE_S):
@@ -277,6 +290,8 @@ class CorrectNode(Node):
 
     def destroy_node(self) -> None:
         """Stop the rebuild thread, then destroy the node."""
+        if getattr(self, '_check', None) is not None:
+            self._check.stop()
         if self._live is not None:
             self._live.stop()
         if self._stage_clock is not None:

@@ -57,6 +57,8 @@ class FrameStats:
         self.decode_count = 0           # since the last diagnostics message
         #: More entries for /diagnostics (the lens_state input's, lens_follower.py).
         self.extra: dict[str, Any] = {}
+        #: The last straight-edge check (check_thread.py), replaced whole by its thread.
+        self.check: dict[str, Any] = {}
         self._logged: dict[str, float] = {}     # kind of error -> time last logged, s
 
     def record_error(self, kind: str, error: str, throttle_s: float) -> bool:
@@ -156,6 +158,7 @@ def diagnostics_message(node: Node, live: LiveStatus, stats: FrameStats,
                         'decode_time_ms_max': decode_max,
                         'decode_time_ms_last': stats.decode_ms_last})
     entries.update(stats.extra)
+    entries.update(stats.check)
     status = DiagnosticStatus(name=status_name(node), hardware_id='')
     warnings: list[str] = []
     summary_pending = live.active is not None and live.report is None
@@ -175,7 +178,8 @@ def diagnostics_message(node: Node, live: LiveStatus, stats: FrameStats,
     elif live.active is None:
         status.level = DiagnosticStatus.OK
         status.message = 'waiting for the first frame'
-    elif warnings:
+    elif warnings + _check_warning(stats.check):
+        warnings += _check_warning(stats.check)
         status.level = DiagnosticStatus.WARN
         status.message = '; '.join(warnings)
     elif stats.last_error and period_frames == 0 and stats.frames_in > stats.frames_out:
@@ -191,6 +195,14 @@ def diagnostics_message(node: Node, live: LiveStatus, stats: FrameStats,
     array.header.stamp = node.get_clock().now().to_msg()
     array.status = [status]
     return array
+
+
+def _check_warning(check: Mapping[str, Any]) -> list[str]:
+    """Return the straight-edge check's warning, if its verdict is description_off."""
+    if check.get('verdict') != 'description_off':
+        return []
+    return ['check: description_off: straight edges come out '
+            f"{_text(check.get('straightness_rms_px'))} px rms from straight (see estimate.*)"]
 
 
 #: Curves of the model report that /diagnostics leaves out (the scalars stay: e.g.

@@ -306,6 +306,23 @@ SCHEMA: tuple[ParamSpec, ...] = (
     _d('output.max_vignetting_gain', 4.0, '1',
        'Largest gain of the vignetting correction; where the relative illumination is below '
        '1 / this the corrected field ends (black).', 1.0, 1.0e3),
+    # --- the live self-check from straight edges (issue 26) ---
+    _d('lens.tolerance.image_distance_mm', 0.01, 'mm',
+       '1-sigma assembly tolerance of the sensor distance behind the lens (the check '
+       'estimates lens.image_distance_mm within it; 0 = held fixed).', 0.0, 10.0),
+    _d('check.rate_hz', 0.2, 'Hz',
+       'Largest rate of the straight-edge self-check, a low-priority thread on a copy of a '
+       'corrected frame (never on the frame path); 0 = off.', 0.0, 10.0),
+    _i('check.window', 5, '1',
+       'Frames whose straight edges the check and its estimate pool (the last N checked).',
+       1, 100),
+    _d('check.max_rms_px', 0.3, 'px',
+       'RMS distance of straight-edge points from their lines (px of the corrected image) '
+       'above which the verdict is description_off (WARN in /diagnostics).', 0.0, 100.0),
+    ParamSpec('check.apply', 'bool', False, '',
+              'Set the estimated assembly parameters on this node (one atomic set) when the '
+              'verdict is description_off and their 1-sigma is within their tolerances; '
+              'never farther than 3 tolerances from the values at start-up.'),
     # --- node behaviour (no effect on the model) ---
     ParamSpec('lazy_subscription', 'bool', True, '',
               'Subscribe to image_raw only while an output topic has a subscriber, like '

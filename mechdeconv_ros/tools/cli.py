@@ -11,6 +11,7 @@ Commands::
     mechdeconv camera-info --params FILE [--width W --height H]
     mechdeconv project --params FILE [--width W --height H] IN.csv   (tx,ty -> tx,ty,u,v)
     mechdeconv vignetting --params FILE [--png OUT.png] [--lensfun]
+    mechdeconv check --params P [--json] IMAGE...
     mechdeconv import LENS.zmx -o lens.yaml [--wavelength-nm NM]
     mechdeconv import TABLE.csv --focal-length-mm F -o lens.yaml
 
@@ -304,6 +305,16 @@ def cmd_project(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_check(args: argparse.Namespace) -> int:
+    """Check raw images against the description (:mod:`mechdeconv_ros.tools.check_cli`)."""
+    from mechdeconv_ros.tools.check_cli import run_check
+    images = [_read(Path(p)) for p in args.images]
+    h, w = images[0].shape[:2]
+    if any(img.shape[:2] != (h, w) for img in images):
+        raise UsageError('check: the images differ in size')
+    return run_check(_model(args, w, h), images, _values(args), args.json, sys.stdout)
+
+
 def _read(path: Path) -> np.ndarray:
     import cv2
     image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
@@ -492,6 +503,12 @@ def build_parser() -> argparse.ArgumentParser:
     vignetting.add_argument('--lensfun', action='store_true',
                             help='print a lensfun <vignetting model="pa"/> entry')
     vignetting.set_defaults(func=cmd_vignetting)
+    check = add('check', 'measure how straight the straight edges of raw images come out, '
+                         'and estimate the assembly (axis offset, tilt, image distance) that '
+                         'straightens them', False)
+    check.add_argument('--json', action='store_true', help='print one JSON object')
+    check.add_argument('images', nargs='+', help='raw image files of one camera')
+    check.set_defaults(func=cmd_check)
     lens_import = sub.add_parser(
         'import', help='write a params file from a .zmx lens file or a datasheet CSV table',
         description='Write a ROS 2 params file (prescription mode) from a Zemax .zmx lens '

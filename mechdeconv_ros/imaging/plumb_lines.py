@@ -1,0 +1,303 @@
+# Copyright 2026 The mechdeconv_ros Authors.
+# SPDX-License-Identifier: Apache-2.0
+"""
+Plumb lines: raw edge points to scene directions, great-circle fits, straightness.
+
+Pure numpy, no ROS. A straight line of the scene and the projection centre span a plane, so
+the directions a central camera sees along it lie on a great circle of the unit sphere
+(Devernay & Faugeras 2001, "Straight lines have to be straight", on the sphere so that a
+fisheye past 90 deg is no special case). The check maps edge points of the raw frame through
+the model's exact inverse to directions, fits to each chain the plane through the origin
+that minimises the sum of squared sines ``(n . d)^2`` (``n`` the eigenvector of the smallest
+eigenvalue of ``sum d d^T``), and reads the residuals.
+
+The inverse for any assembly (:class:`ChiefLines`; the same equations as
+:mod:`mechdeconv_ros.model.assembly`): the chief ray of field angle theta and azimuth phi runs
+in image space along ``rho(z) = h(theta) + s(theta) (z - z_s)`` (``h`` the real height on the
+model's sensor plane ``z_s``, ``s`` its slope). The pose vector ``p = (dx, dy, alpha, beta,
+dz)`` puts the sensor's axis pixel at ``((W - 1) / 2 + dx / p_x, (H - 1) / 2 + dy / p_y)``,
+turns it by ``R = R_x(alpha) R_y(beta)`` and moves it ``dz`` along the axis from ``z_s`` (mm,
+> 0 away from the lens). A pixel at in-plane offsets ``(a, b)`` (mm, along rows and columns
+from the axis pixel) is the point ``Q = R (a, b, 0)`` from the axis point; its direction has
+``phi = atan2(Q_y, Q_x)`` and theta solving ``h(theta) + s(theta) (Q_z + dz) = hypot(Q_x,
+Q_y)`` (Newton on a dense uniform table of ``h`` and ``s``). The direction is ``(sin theta cos
+phi, sin theta sin phi, cos theta)`` in the camera's optical frame (X right, Y down, Z ahead).
+
+Straightness in px of the corrected image: for a ``pinhole`` output, the points' corrected
+pixels (``x = f_x X / Z + c_x``, within the image) get a total-least-squares line each and
+the distances from it are read; for ``equidistant`` (a fisheye, where the corrected image
+bends scene lines) the great-circle residual angle times the output focal length (px per rad
+at the centre of the corrected image).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+from typing import Any
+
+from mechdeconv_ros.model.radial_map import hermite
+import numpy as np
+import numpy.typing as npt
+
+#: Samples of the dense table of h(theta), s(theta) the inverse interpolates linearly (its
+#: error h'' dtheta^2 / 8 is below 1e-8 mm for the wide-angle and fisheye configs).
+TABLE_SAMPLES = 8192
+#: Newton steps of the inverse from the untilted root.
+NEWTON_STEPS = 4
+#: A chain is cut where it leaves a great circle by more than this (px at the output focal
+#: length) or this fraction of its length, whichever is larger.
+SPLIT_PX = 1.5
+SPLIT_FRACTION = 0.006
+#: Shortest straight edge kept, px (its chord at the output focal length).
+MIN_EDGE_PX = 48.0
+#: Fewest raw points of a straight edge.
+MIN_EDGE_POINTS = 24
+#: At most this many points per edge enter the fits (evenly spaced along the edge).
+MAX_POINTS_PER_EDGE = 160
+#: The field coverage counts the cells of a COVERAGE_CELLS x COVERAGE_CELLS grid over the raw
+#: frame (those inside the lens's field) that hold points of a straight edge.
+COVERAGE_CELLS = 8
+
+Points = npt.NDArray[np.float64]
+
+
+def rotation(alpha_rad: float, beta_rad: float) -> npt.NDArray[np.float64]:
+    """Return ``R = R_x(alpha) R_y(beta)`` (columns: the sensor's row, column and normal)."""
+    ca, sa = math.cos(alpha_rad), math.sin(alpha_rad)
+    cb, sb = math.cos(beta_rad), math.sin(beta_rad)
+    rx = np.array([[1.0, 0.0, 0.0], [0.0, ca, sa], [0.0, -sa, ca]])
+    ry = np.array([[cb, 0.0, sb], [0.0, 1.0, 0.0], [-sb, 0.0, cb]])
+    return rx @ ry
+
+
+@dataclass
+class ChiefLines:
+    """The model's chief-ray lines on a dense table, and the raw frame's geometry."""
+
+    theta: npt.NDArray[np.float64]
+    height: npt.NDArray[np.float64]
+    slope: npt.NDArray[np.float64]
+    width: int
+    height_px: int
+    pixel_mm: tuple[float, float]
+
+    @classmethod
+    def from_model(cls, model: Any) -> ChiefLines:
+        """
+        Tabulate a :class:`~mechdeconv_ros.model.model.LensModel`'s field trace.
+
+        Its slopes are the traced ones when the trace holds them, else ``h / v`` (rays
+        through the rear principal point).
+
+        :param model: the lens model.
+        :return: the table.
+        """
+        field = model.field_curve
+        theta0 = np.asarray(field.field_angle_rad, dtype=np.float64)
+        h0 = np.asarray(field.real_mm, dtype=np.float64)
+        s0 = getattr(field, 'slope', None)
+        if s0 is None:
+            s0 = h0 / model.image_distance_mm
+        theta = np.linspace(0.0, float(theta0[-1]), TABLE_SAMPLES)
+        return cls(theta, hermite(theta0, h0, theta), hermite(theta0, np.asarray(s0), theta),
+                   model.width, model.height, model.pixel_mm)
+
+    def directions(self, points: Points, pose: npt.NDArray[np.float64]) -> Points:
+        """
+        Return the unit scene directions raw pixels see under a sensor pose.
+
+        :param points: ``(N, 2)`` raw (x, y).
+        :param pose: ``(dx_mm, dy_mm, alpha_deg, beta_deg, dz_mm)``.
+        :return: ``(N, 3)``; NaN outside the traced field.
+        """
+        px, py = self.pixel_mm
+        a = (points[:, 0] - (self.width - 1) / 2.0 - pose[0] / px) * px
+        b = (points[:, 1] - (self.height_px - 1) / 2.0 - pose[1] / py) * py
+        r = rotation(math.radians(pose[2]), math.radians(pose[3]))
+        qx = r[0, 0] * a + r[0, 1] * b
+        qy = r[1, 0] * a + r[1, 1] * b
+        dz = r[2, 0] * a + r[2, 1] * b + pose[4]
+        radius = np.hypot(qx, qy)
+        phi = np.arctan2(qy, qx)
+        theta = self._solve(radius, dz)
+        sin_t = np.sin(theta)
+        return np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), np.cos(theta)], axis=1)
+
+    def raw_scale(self, dirs: Points) -> Points:
+        """
+        Return raw px per rad around directions.
+
+        Isotropic: the geometric mean of the radial ``dh / dtheta`` and the tangential
+        ``h / sin theta`` scales.
+
+        :param dirs: ``(N, 3)`` unit directions.
+        :return: ``(N,)`` px / rad; NaN outside the field.
+        """
+        theta = np.arccos(np.clip(dirs[:, 2], -1.0, 1.0))
+        radial = np.interp(theta, self.theta, np.gradient(self.height, self.theta))
+        with np.errstate(invalid='ignore', divide='ignore'):
+            tangential = np.where(theta > 1e-6, np.interp(theta, self.theta, self.height)
+                                  / np.sin(theta), radial)
+        return np.sqrt(radial * tangential) / math.sqrt(self.pixel_mm[0] * self.pixel_mm[1])
+
+    def _solve(self, radius: Points, dz: Points) -> Points:
+        """Solve ``h(theta) + s(theta) dz = radius`` on the table (linear pieces)."""
+        t, h, s = self.theta, self.height, self.slope
+        step = float(t[1] - t[0])
+        theta = np.interp(radius, h, t)
+        for _ in range(NEWTON_STEPS):
+            k = np.clip((theta / step).astype(np.int64), 0, t.size - 2)
+            frac = theta / step - k
+            value = h[k] + frac * (h[k + 1] - h[k]) + dz * (s[k] + frac * (s[k + 1] - s[k]))
+            slope = (h[k + 1] - h[k] + dz * (s[k + 1] - s[k])) / step
+            with np.errstate(invalid='ignore', divide='ignore'):
+                theta = theta - (value - radius) / slope
+        bad = ~np.isfinite(theta) | (theta < 0.0) | (theta > t[-1])
+        return np.where(bad, np.nan, theta)
+
+
+def edge_index(edges: list[Points]) -> npt.NDArray[np.int64]:
+    """Return the edge number of each point of the concatenated edges."""
+    return np.repeat(np.arange(len(edges)), [e.shape[0] for e in edges])
+
+
+def great_circles(dirs: Points, index: npt.NDArray[np.int64], count: int
+                  ) -> tuple[Points, Points]:
+    """
+    Fit a plane through the origin to the directions of each edge.
+
+    :param dirs: ``(N, 3)`` unit directions (finite).
+    :param index: ``(N,)`` edge number of each.
+    :param count: number of edges.
+    :return: ``(normals (count, 3), residuals (N,))``, residual = ``n . d`` (sine of the
+        angle from the great circle).
+    """
+    scatter = np.zeros((count, 3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            value = np.bincount(index, dirs[:, i] * dirs[:, j], minlength=count)
+            scatter[:, i, j] = value
+            scatter[:, j, i] = value
+    _, vectors = np.linalg.eigh(scatter)
+    normals = vectors[:, :, 0]
+    return normals, np.einsum('ij,ij->i', normals[index], dirs)
+
+
+def _cut(dirs: Points, tol_px: float, f_px: float, out: list[tuple[int, int]],
+         start: int) -> None:
+    """Cut an ordered run of directions into great-circle pieces (recursive)."""
+    n = dirs.shape[0]
+    if n < 8:
+        return
+    chord = math.acos(float(np.clip(dirs[0] @ dirs[-1], -1.0, 1.0))) * f_px
+    if chord < MIN_EDGE_PX:
+        return
+    _, res = great_circles(dirs, np.zeros(n, dtype=np.int64), 1)
+    worst = int(np.argmax(np.abs(res)))
+    if abs(res[worst]) * f_px <= max(tol_px, SPLIT_FRACTION * chord):
+        out.append((start, start + n))
+        return
+    cut = worst if n // 8 < worst < n - n // 8 else n // 2
+    _cut(dirs[:cut], tol_px, f_px, out, start)
+    _cut(dirs[cut:], tol_px, f_px, out, start + cut)
+
+
+def straight_edges(chains: list[Points], lines: ChiefLines, pose: npt.NDArray[np.float64],
+                   f_px: float) -> list[Points]:
+    """
+    Return the pieces of raw chains that are straight in the scene under a pose.
+
+    :param chains: ordered raw chains (:func:`~mechdeconv_ros.imaging.straight_edges.
+        detect_chains`).
+    :param lines: the inverse.
+    :param pose: the pose the pieces are judged with (the description's).
+    :param f_px: output focal length, px per rad.
+    :return: raw point arrays, each thinned to at most ``MAX_POINTS_PER_EDGE`` points.
+    """
+    edges = []
+    for chain in chains:
+        dirs = lines.directions(chain, pose)
+        good = np.all(np.isfinite(dirs), axis=1)
+        chain, dirs = chain[good], dirs[good]
+        pieces: list[tuple[int, int]] = []
+        _cut(dirs, SPLIT_PX, f_px, pieces, 0)
+        for lo, hi in pieces:
+            piece = chain[lo:hi]
+            if piece.shape[0] < MIN_EDGE_POINTS:
+                continue
+            if piece.shape[0] > MAX_POINTS_PER_EDGE:
+                pick = np.linspace(0, piece.shape[0] - 1, MAX_POINTS_PER_EDGE).round()
+                piece = piece[pick.astype(np.int64)]
+            edges.append(piece)
+    return edges
+
+
+def output_focal_px(model: Any) -> float:
+    """Return the corrected image's focal length (geometric mean of fx, fy), px."""
+    return float(math.sqrt(model.K_new[0, 0] * model.K_new[1, 1]))
+
+
+def straightness_px(model: Any, dirs: Points, index: npt.NDArray[np.int64], count: int
+                    ) -> tuple[float, float, Points]:
+    """
+    Return the RMS and largest distance from the fitted lines, px of the corrected image.
+
+    :param model: the lens model (its output projection, K_new and size).
+    :param dirs: ``(N, 3)`` finite directions.
+    :param index: edge number of each.
+    :param count: number of edges.
+    :return: ``(rms, max, per-edge rms)``; NaN when no edge has points.
+    """
+    if model.projection != 'pinhole':
+        _, res = great_circles(dirs, index, count)
+        dist = np.abs(res) * output_focal_px(model)
+    else:
+        cos_limit = math.cos(math.radians(89.0))
+        with np.errstate(invalid='ignore', divide='ignore'):
+            x = model.K_new[0, 0] * dirs[:, 0] / dirs[:, 2] + model.K_new[0, 2]
+            y = model.K_new[1, 1] * dirs[:, 1] / dirs[:, 2] + model.K_new[1, 2]
+        keep = ((dirs[:, 2] > cos_limit) & (x >= 0) & (y >= 0)
+                & (x <= model.out_width - 1) & (y <= model.out_height - 1))
+        keep &= np.bincount(index[keep], minlength=count)[index] >= 3
+        x, y, index = x[keep], y[keep], index[keep]
+        if index.size == 0:
+            return math.nan, math.nan, np.full(count, np.nan)
+        n = np.maximum(np.bincount(index, minlength=count), 1)
+        mx = np.bincount(index, x, count) / n
+        my = np.bincount(index, y, count) / n
+        dx, dy = x - mx[index], y - my[index]
+        sxx = np.bincount(index, dx * dx, count)
+        syy = np.bincount(index, dy * dy, count)
+        sxy = np.bincount(index, dx * dy, count)
+        # The normal of the TLS line: the eigenvector of the smaller eigenvalue.
+        angle = 0.5 * np.arctan2(2.0 * sxy, sxx - syy) + 0.5 * math.pi
+        dist = np.abs(dx * np.cos(angle[index]) + dy * np.sin(angle[index]))
+    per_edge = np.sqrt(np.bincount(index, dist ** 2, count)
+                       / np.maximum(np.bincount(index, minlength=count), 1))
+    if dist.size == 0:
+        return math.nan, math.nan, per_edge
+    return float(np.sqrt(np.mean(dist ** 2))), float(dist.max()), per_edge
+
+
+def field_coverage(lines: ChiefLines, pose: npt.NDArray[np.float64], points: Points) -> float:
+    """
+    Return the fraction of the field's cells that hold edge points.
+
+    :param lines: the inverse (its raw frame size and field).
+    :param pose: the pose that decides which cells are inside the field.
+    :param points: ``(N, 2)`` raw points of the straight edges.
+    :return: 0..1.
+    """
+    n = COVERAGE_CELLS
+    cx = (np.arange(n) + 0.5) * lines.width / n - 0.5
+    cy = (np.arange(n) + 0.5) * lines.height_px / n - 0.5
+    grid = np.stack(np.meshgrid(cx, cy), axis=-1).reshape(-1, 2)
+    inside = np.all(np.isfinite(lines.directions(grid, pose)), axis=1)
+    if points.size == 0 or not inside.any():
+        return 0.0
+    col = np.clip((points[:, 0] + 0.5) * n / lines.width, 0, n - 1).astype(np.int64)
+    row = np.clip((points[:, 1] + 0.5) * n / lines.height_px, 0, n - 1).astype(np.int64)
+    hit = np.zeros(n * n, dtype=bool)
+    hit[row * n + col] = True
+    return float(np.count_nonzero(hit & inside) / np.count_nonzero(inside))

@@ -1,0 +1,178 @@
+# Copyright 2026 The mechdeconv_ros Authors.
+# SPDX-License-Identifier: Apache-2.0
+"""
+Edge chains for the plumb-line check: sub-pixel edge points, linked, cut at junctions.
+
+Pure OpenCV and numpy, no ROS. Works on any single frame (raw or corrected); the geometry
+(which chains are straight in the scene) is :mod:`mechdeconv_ros.imaging.plumb_lines`.
+
+1. The frame, as 8-bit-range float grey, is smoothed by a Gaussian of ``EDGE_SIGMA_PX`` and
+   differentiated by 3x3 Sobel kernels (gx, gy); Canny (L2 gradient, hysteresis
+   ``CANNY_LOW`` / ``CANNY_HIGH`` in Sobel units, i.e. 8x the grey step per pixel of the
+   smoothed frame) keeps the one-pixel-wide ridge of the gradient magnitude ``g``.
+2. Sub-pixel position: along the unit gradient ``n`` the parabola through ``g`` at the
+   pixel and one pixel either side (bilinear samples) has its vertex at
+   ``d = (g- - g+) / (2 (g- - 2 g0 + g+))``, ``|d| <= 0.5``; the point is ``p + d n``
+   (Devernay 1995, along the gradient rather than the nearer axis).
+3. Chains: a ridge pixel whose 8-neighbourhood holds three or more separate runs of ridge
+   pixels (the crossing number) is a junction (a T, an X) and is dropped with its
+   neighbours; the rest are split into 8-connected components, each a simple curve. The
+   points of a chain are ordered along its principal axis (the chains are arcs of less than
+   a half turn after the split of :mod:`~mechdeconv_ros.imaging.plumb_lines`).
+
+Sign conventions: pixel (x, y) = (column, row) with the centre of the top-left pixel at
+(0, 0), as OpenCV's remap maps.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+#: Gaussian smoothing before the gradient, px (sigma).
+EDGE_SIGMA_PX = 1.0
+#: Canny hysteresis thresholds on the L2 Sobel gradient (3x3 kernel: 8 x grey step / px).
+CANNY_LOW = 24.0
+CANNY_HIGH = 64.0
+#: Grey level (8-bit range) below which a pixel is black: outside the image circle or the
+#: corrected field. Ridges near black are its border, not the scene's.
+DARK_LEVEL = 6.0
+#: Points dropped at each end of a chain (rounded corners where it met a junction).
+TRIM_POINTS = 4
+#: A chain shorter than this many ridge pixels is dropped (too short to tell a curve).
+MIN_CHAIN_POINTS = 24
+
+Points = npt.NDArray[np.float64]
+
+
+def grey(image: np.ndarray) -> npt.NDArray[np.float32]:
+    """
+    Return the frame as float32 grey scaled to the 8-bit range.
+
+    :param image: ``(H, W)`` or ``(H, W, C)`` (C = 3 or 4, BGR order), uint8, uint16 or float.
+    :return: ``(H, W)`` float32.
+    """
+    img = np.asarray(image)
+    if img.ndim == 3:
+        img = img[..., :3].astype(np.float32).mean(axis=2)
+    out = img.astype(np.float32)
+    if np.asarray(image).dtype == np.uint16:
+        out *= np.float32(255.0 / 65535.0)
+    return out
+
+
+def _crossing_number(ridge: npt.NDArray[np.uint8]) -> npt.NDArray[np.int32]:
+    """Return, per pixel, how many separate runs of ridge pixels surround it (0..4)."""
+    padded = np.pad(ridge, 1)
+    h, w = ridge.shape
+    ring = [(0, 1), (0, 2), (1, 2), (2, 2), (2, 1), (2, 0), (1, 0), (0, 0)]
+    values = [padded[r:r + h, c:c + w].astype(np.int32) for r, c in ring]
+    count = np.zeros((h, w), dtype=np.int32)
+    for k in range(8):
+        count += (values[k] == 0) & (values[(k + 1) % 8] == 1)
+    return count
+
+
+def detect_chains(image: np.ndarray, valid: npt.NDArray[np.bool_] | None = None
+                  ) -> list[Points]:
+    """
+    Return the sub-pixel edge chains of a frame, each ``(N, 2)`` (x, y), ordered.
+
+    :param image: the frame (see :func:`grey`).
+    :param valid: optional mask of the pixels that hold image (False: black outside the
+        image circle or the corrected field); ridges within 4 px of its border, or of a
+        black (below ``DARK_LEVEL``) region, are dropped.
+    :return: the chains with at least ``MIN_CHAIN_POINTS`` points.
+    """
+    g = cv2.GaussianBlur(grey(image), (0, 0), EDGE_SIGMA_PX)
+    lit = g > DARK_LEVEL
+    valid = lit if valid is None else (valid & lit)
+    gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3)
+    gy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3)
+    ridge = cv2.Canny(np.clip(np.rint(gx), -32767, 32767).astype(np.int16),
+                      np.clip(np.rint(gy), -32767, 32767).astype(np.int16),
+                      CANNY_LOW, CANNY_HIGH, L2gradient=True)
+    ridge = (ridge > 0).astype(np.uint8)
+    ridge[:2, :] = 0
+    ridge[-2:, :] = 0
+    ridge[:, :2] = 0
+    ridge[:, -2:] = 0
+    ridge &= cv2.erode(valid.astype(np.uint8), np.ones((9, 9), np.uint8))
+    junction = (_crossing_number(ridge) >= 3) & (ridge > 0)
+    if junction.any():
+        ridge[cv2.dilate(junction.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0] = 0
+    count, labels = cv2.connectedComponents(ridge, connectivity=8)
+    if count <= 1:
+        return []
+    rows, cols = np.nonzero(labels)
+    lab = labels[rows, cols]
+    mag = np.hypot(gx, gy)
+    # Sub-pixel offset along the unit gradient n: the parabola through g(p - n), g(p),
+    # g(p + n) (bilinear samples).
+    g_zero = mag[rows, cols].astype(np.float64)
+    nx = gx[rows, cols] / np.maximum(g_zero, 1e-9)
+    ny = gy[rows, cols] / np.maximum(g_zero, 1e-9)
+    g_minus = _bilinear(mag, cols - nx, rows - ny)
+    g_plus = _bilinear(mag, cols + nx, rows + ny)
+    curvature = g_minus - 2.0 * g_zero + g_plus
+    with np.errstate(invalid='ignore', divide='ignore'):
+        offset = np.where(curvature < 0.0, 0.5 * (g_minus - g_plus) / curvature, 0.0)
+    offset = np.clip(offset, -0.5, 0.5)
+    x = cols + offset * nx
+    y = rows + offset * ny
+    order = np.argsort(lab, kind='stable')
+    lab, x, y = lab[order], x[order], y[order]
+    bounds = np.flatnonzero(np.diff(lab)) + 1
+    chains = []
+    for xs, ys in zip(np.split(x, bounds), np.split(y, bounds)):
+        if xs.size < MIN_CHAIN_POINTS + 2 * TRIM_POINTS:
+            continue
+        pts = np.stack([xs, ys], axis=1).astype(np.float64)
+        chains.append(order_along(pts)[TRIM_POINTS:-TRIM_POINTS])
+    return chains
+
+
+def _bilinear(img: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Sample an image bilinearly at (x, y) (inside by at least one pixel)."""
+    x0 = np.floor(x).astype(np.int64)
+    y0 = np.floor(y).astype(np.int64)
+    fx, fy = x - x0, y - y0
+    return ((1 - fx) * (1 - fy) * img[y0, x0] + fx * (1 - fy) * img[y0, x0 + 1]
+            + (1 - fx) * fy * img[y0 + 1, x0] + fx * fy * img[y0 + 1, x0 + 1])
+
+
+def order_along(points: Points) -> Points:
+    """
+    Order points along their principal axis (the chord of an arc of less than a half turn).
+
+    :param points: ``(N, 2)``.
+    :return: the same points, sorted.
+    """
+    centred = points - points.mean(axis=0)
+    _, _, vt = np.linalg.svd(centred, full_matrices=False)
+    return points[np.argsort(centred @ vt[0], kind='stable')]
+
+
+def sample_map(map_x: np.ndarray, map_y: np.ndarray, points: Points) -> Points:
+    """
+    Bilinearly sample a remap's maps at sub-pixel points of the corrected image.
+
+    :param map_x: ``(H, W)`` float raw x of each corrected pixel (cv2.remap's map1).
+    :param map_y: ``(H, W)`` float raw y.
+    :param points: ``(N, 2)`` corrected (x, y).
+    :return: ``(N, 2)`` raw (x, y); NaN outside the maps or where they are invalid.
+    """
+    h, w = map_x.shape
+    x, y = points[:, 0], points[:, 1]
+    x0 = np.clip(np.floor(x).astype(np.int64), 0, w - 2)
+    y0 = np.clip(np.floor(y).astype(np.int64), 0, h - 2)
+    fx, fy = x - x0, y - y0
+    out = np.empty_like(points)
+    for k, m in enumerate((map_x, map_y)):
+        m = m.astype(np.float64)
+        out[:, k] = ((1 - fx) * (1 - fy) * m[y0, x0] + fx * (1 - fy) * m[y0, x0 + 1]
+                     + (1 - fx) * fy * m[y0 + 1, x0] + fx * fy * m[y0 + 1, x0 + 1])
+    bad = (x < 0) | (y < 0) | (x > w - 1) | (y > h - 1) | (out[:, 0] < -1e3) | (out[:, 1] < -1e3)
+    out[bad] = np.nan
+    return out

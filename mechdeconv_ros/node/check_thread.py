@@ -1,0 +1,181 @@
+# Copyright 2026 The mechdeconv_ros Authors.
+# SPDX-License-Identifier: Apache-2.0
+"""
+The node's live self-check: a low-priority thread off the frame path (issue 26).
+
+At most ``check.rate_hz`` times a second, counted from the end of the last check (0 = off),
+the frame callback hands over a COPY of a
+corrected frame with the model that made it (:meth:`CheckThread.offer`: a dict swap and one
+``np.copy``, nothing else on the frame path). The thread, at nice 19 on Linux, detects the
+edge chains of that frame, carries them to raw pixels through the same model's float maps
+(so the raw points do not depend on any later model), keeps the chains of the last
+``check.window`` frames, and runs :func:`~mechdeconv_ros.imaging.plumb_check.check_chains`
+with the node's current model. The result goes to ``/diagnostics`` under the keys of
+:meth:`~mechdeconv_ros.imaging.plumb_check.CheckResult.as_dict` (``estimate.<name>.value``
+and ``.sigma``), with ``check_ms_last`` (the thread's time), ``check_frames`` (in the
+window), ``checks`` (done since start) and ``check_applied`` (sets made).
+
+``check.apply``: when the verdict is ``description_off`` and a parameter's sigma is within
+its tolerance, the thread sets the estimated parameters on the node in ONE
+``set_parameters_atomically`` call (the node's own parameter API: its validation, its atomic
+rebuild, visible in ``ros2 param get``), logged; never farther than ``BOUND_SIGMAS``
+tolerances from the values the node started with. The rebuild swaps the whole model at
+once, so no frame mixes two models.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+import os
+import threading
+import time
+from typing import Any, Callable
+
+from mechdeconv_ros.imaging.plumb_check import (
+    chains_from_corrected, check_chains, CheckResult, ESTIMATED, to_apply)
+from mechdeconv_ros.imaging.remap import build_float_maps
+import numpy as np
+from rclpy.parameter import Parameter
+
+#: Seconds the thread waits for a frame before it looks at its stop flag again.
+WAIT_S = 0.5
+
+
+def diagnostics_entries(result: CheckResult) -> dict[str, Any]:
+    """
+    Return a check result as flat /diagnostics entries (the issue's key names).
+
+    :param result: the check.
+    :return: key -> value; the estimate as ``estimate.<parameter>.value`` / ``.sigma``.
+    """
+    out = {key: value for key, value in result.as_dict().items() if key != 'estimate'}
+    for name, est in result.estimate.items():
+        out[f'estimate.{name}.value'] = est['value']
+        out[f'estimate.{name}.sigma'] = est['sigma']
+    return out
+
+
+class CheckThread:
+    """The low-priority straight-edge check of a node."""
+
+    def __init__(self, node: Any, value: Callable[[str], Any], current_model: Callable[[], Any],
+                 publish: Callable[[dict[str, Any]], None]):
+        """
+        Create the thread (not started).
+
+        :param node: the rclpy node (its logger and ``set_parameters_atomically``).
+        :param value: the node's current parameter value by name.
+        :param current_model: returns the node's active model (None before the first frame).
+        :param publish: receives the /diagnostics entries after each check.
+        """
+        self._node, self._value, self._current_model = node, value, current_model
+        self._publish = publish
+        self._lock = threading.Lock()
+        self._pending: tuple[np.ndarray, Any] | None = None
+        self._wake = threading.Event()
+        self._stop = False
+        self._last_offer = -1e9
+        self._busy = False
+        self._maps: tuple[Any, Any, Any] = (None, None, None)
+        self._window: deque[list[Any]] = deque()
+        self._reference = {name: float(value(name)) for name, _ in ESTIMATED}
+        self.checks = 0
+        self.applied = 0
+        self._thread = threading.Thread(target=self._run, name='check', daemon=True)
+
+    def start(self) -> None:
+        """Start the thread."""
+        self._thread.start()
+
+    def stop(self) -> None:
+        """Stop the thread and wait for it (at most a check's time)."""
+        self._stop = True
+        self._wake.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout=30.0)
+
+    def offer(self, corrected: np.ndarray, model: Any) -> None:
+        """
+        Hand over a corrected frame, if the rate allows and the thread is idle (frame path).
+
+        :param corrected: the corrected frame (copied here when taken).
+        :param model: the model that corrected it.
+        """
+        rate = float(self._value('check.rate_hz'))
+        now = time.monotonic()
+        if rate <= 0.0 or self._busy or now - self._last_offer < 1.0 / rate:
+            return
+        self._last_offer = now
+        with self._lock:
+            self._pending = (np.copy(corrected), model)
+            self._busy = True
+        self._wake.set()
+
+    def _run(self) -> None:
+        try:        # the lowest CPU priority for this thread only (Linux: a thread id)
+            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 19)
+        except (AttributeError, OSError):
+            pass
+        while not self._stop:
+            if not self._wake.wait(WAIT_S):
+                continue
+            self._wake.clear()
+            with self._lock:
+                pending, self._pending = self._pending, None
+            if pending is None:
+                continue
+            try:
+                self._check(*pending)
+            except Exception as err:    # noqa: B902 - the check must never stop the node
+                self._node.get_logger().error(f'check failed: {err!r}',
+                                              throttle_duration_sec=60.0)
+            finally:
+                # The period runs from the end of a check: the thread idles at least
+                # 1 / check.rate_hz between checks, however long one takes.
+                self._last_offer = time.monotonic()
+                self._busy = False
+
+    def _check(self, frame: np.ndarray, model: Any) -> None:
+        start = time.perf_counter()
+        if self._maps[0] is not model:
+            self._maps = (model, *build_float_maps(model))
+        _, map_x, map_y = self._maps
+        self._window.append(chains_from_corrected(frame, map_x, map_y))
+        while len(self._window) > int(self._value('check.window')):
+            self._window.popleft()
+        current = self._current_model() or model
+        if (current.width, current.height) != (model.width, model.height):
+            self._window.clear()
+            return
+        chains = [c for frame_chains in self._window for c in frame_chains]
+        result = check_chains(current, chains, float(self._value('check.max_rms_px')))
+        self.checks += 1
+        entries = diagnostics_entries(result)
+        entries['check_frames'] = len(self._window)
+        entries['checks'] = self.checks
+        entries['check_ms_last'] = (time.perf_counter() - start) * 1e3
+        entries['check_applied'] = self.applied
+        self._publish(entries)
+        if result.verdict == 'description_off':
+            self._node.get_logger().warning(
+                f'check: description_off (straightness {result.straightness_rms_px:.3f} px '
+                f'rms over {result.edges} edges; after the estimate '
+                f'{result.straightness_rms_px_after or float("nan"):.3f} px)',
+                throttle_duration_sec=60.0)
+        if bool(self._value('check.apply')):
+            self._apply(result)
+
+    def _apply(self, result: CheckResult) -> None:
+        values = {name: self._value(name) for name, _ in ESTIMATED}
+        changes = to_apply(result, values, self._reference)
+        if not changes:
+            return
+        outcome = self._node.set_parameters_atomically(
+            [Parameter(name, Parameter.Type.DOUBLE, value) for name, value in changes.items()])
+        if outcome.successful:
+            self.applied += 1
+            # The chains stay (raw points); the next check judges the new description.
+            self._node.get_logger().info(
+                'check.apply: set ' + ', '.join(f'{n} = {v:.6g}' for n, v in changes.items()))
+        else:
+            self._node.get_logger().warning(f'check.apply refused: {outcome.reason}')

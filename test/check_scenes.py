@@ -1,0 +1,217 @@
+# Copyright 2026 The mechdeconv_ros Authors.
+# SPDX-License-Identifier: Apache-2.0
+"""
+Raw frames of straight-line scenes rendered through an independent route (test helper).
+
+The lens: optiland's chief-ray heights ``h(theta)`` of the wide-angle and fisheye configs
+(test/data/optiland_wide_reference.json, traced by tools/make_optiland_reference.py with
+optiland's robust aimer), interpolated by a natural cubic spline of this file (not the
+package's Hermite tables) and inverted on a dense table. A raw pixel (u, v) at in-plane
+offsets ``(a, b) = ((u - c_u) p, (v - c_v) p)`` from the axis pixel ``c`` (the true axis
+offset) sees the direction of field angle ``theta = h^-1(hypot(a, b))`` and azimuth
+``atan2(b, a)``. No remap and no code of the package is used.
+
+Scenes (central camera, directions only): a planar grid of dark bars on a bounded light
+plane at any orientation, a box room (six walls of different greys with dark doors and
+windows), and discs (circles) on a plane. Edges are anti-aliased analytically (the box
+filter of the pixel: a linear ramp one footprint wide) and wall-to-wall edges by 4 x 4
+supersampling; then a Gaussian blur of ``BLUR_PX`` (the optics) and 8-bit quantisation.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+DATA = Path(__file__).resolve().parent / 'data' / 'optiland_wide_reference.json'
+LENSES = {'wide': ('wide_angle_160', 'config/wide_angle.yaml', 1920, 1200),
+          'fisheye': ('fisheye_170', 'config/fisheye.yaml', 1280, 960)}
+PIXEL_MM = 0.002
+BLUR_PX = 0.7
+
+
+def _natural_spline(x: np.ndarray, y: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Evaluate the natural cubic spline through (x, y) at q."""
+    n = x.size
+    h = np.diff(x)
+    a = np.zeros((n, n))
+    rhs = np.zeros(n)
+    a[0, 0] = a[-1, -1] = 1.0
+    for i in range(1, n - 1):
+        a[i, i - 1], a[i, i], a[i, i + 1] = h[i - 1], 2 * (h[i - 1] + h[i]), h[i]
+        rhs[i] = 6 * ((y[i + 1] - y[i]) / h[i] - (y[i] - y[i - 1]) / h[i - 1])
+    m = np.linalg.solve(a, rhs)
+    k = np.clip(np.searchsorted(x, q) - 1, 0, n - 2)
+    t = q - x[k]
+    hk = h[k]
+    return (m[k] * (x[k + 1] - q) ** 3 / (6 * hk) + m[k + 1] * t ** 3 / (6 * hk)
+            + (y[k] / hk - m[k] * hk / 6) * (x[k + 1] - q) + (y[k + 1] / hk - m[k + 1] * hk / 6)
+            * t)
+
+
+class Lens:
+    """The optiland curve of one lens, as a raw pixel -> direction map."""
+
+    def __init__(self, name: str):
+        key, self.config, self.width, self.height = LENSES[name]
+        curve = json.loads(DATA.read_text())['lenses'][key]['curve']
+        theta = np.radians(np.asarray(curve['field_angle_deg'], dtype=float))
+        height = np.abs(np.asarray(curve['real_height_mm'], dtype=float))
+        self.theta = np.linspace(0.0, theta[-1], 200001)
+        self.h = _natural_spline(theta, height, self.theta)
+
+    def directions(self, u: np.ndarray, v: np.ndarray, offset_px: tuple[float, float]
+                   ) -> np.ndarray:
+        """Return the unit direction of each raw pixel, shape (..., 3); NaN outside the field."""
+        a = (u - (self.width - 1) / 2.0 - offset_px[0]) * PIXEL_MM
+        b = (v - (self.height - 1) / 2.0 - offset_px[1]) * PIXEL_MM
+        rho = np.hypot(a, b)
+        theta = np.interp(rho, self.h, self.theta, right=np.nan)
+        phi = np.arctan2(b, a)
+        s = np.sin(theta)
+        return np.stack([s * np.cos(phi), s * np.sin(phi), np.cos(theta)], axis=-1)
+
+
+def _rot(yaw_deg: float, pitch_deg: float, roll_deg: float = 0.0) -> np.ndarray:
+    y, p, r = (math.radians(a) for a in (yaw_deg, pitch_deg, roll_deg))
+    ry = np.array([[math.cos(y), 0, math.sin(y)], [0, 1, 0], [-math.sin(y), 0, math.cos(y)]])
+    rx = np.array([[1, 0, 0], [0, math.cos(p), -math.sin(p)], [0, math.sin(p), math.cos(p)]])
+    rz = np.array([[math.cos(r), -math.sin(r), 0], [math.sin(r), math.cos(r), 0], [0, 0, 1]])
+    return ry @ rx @ rz
+
+
+def _ramp(dist: np.ndarray, half_width: float) -> np.ndarray:
+    """Return the pixel-area coverage of |dist| < half_width (dist in px, signed)."""
+    return np.clip(0.5 + (half_width - np.abs(dist)), 0.0, 1.0)
+
+
+def _plane_coords(d: np.ndarray, rot: np.ndarray, distance: float) -> tuple[np.ndarray, ...]:
+    """Intersect directions with the plane z' = distance of the frame rot; (s, t, hit)."""
+    local = d @ rot
+    with np.errstate(invalid='ignore', divide='ignore'):
+        k = distance / local[..., 2]
+        hit = np.isfinite(k) & (k > 0)
+        return local[..., 0] * k, local[..., 1] * k, hit
+
+
+def _px_dist(coord: np.ndarray, period: float, half: float) -> np.ndarray:
+    """Return the distance (px) of each pixel to the nearest bar centre of a periodic grid."""
+    gy, gx = np.gradient(coord)
+    foot = np.hypot(gx, gy)
+    wrapped = (coord + 0.5 * period) % period - 0.5 * period
+    with np.errstate(invalid='ignore', divide='ignore'):
+        return wrapped / foot, half / foot
+
+
+def grid(lens: Lens, offset_px: tuple[float, float], yaw: float, pitch: float,
+         roll: float, circles: bool = False) -> np.ndarray:
+    """Render a bounded grid of bars (or discs) on a plane; return an 8-bit raw frame."""
+    u, v = np.meshgrid(np.arange(lens.width, dtype=float), np.arange(lens.height, dtype=float))
+    d = lens.directions(u, v, offset_px)
+    s, t, hit = _plane_coords(d, _rot(yaw, pitch, roll), 1.0)
+    img = np.full(u.shape, 0.35)
+    limit = 2.2
+    inside = hit & (np.abs(s) < limit) & (np.abs(t) < limit)
+    if circles:
+        period = 0.9
+        cs = (s + 0.5 * period) % period - 0.5 * period
+        ct = (t + 0.5 * period) % period - 0.5 * period
+        r = np.hypot(cs, ct)
+        gy, gx = np.gradient(np.where(inside, r, 0.0))
+        foot = np.hypot(gx, gy)
+        with np.errstate(invalid='ignore', divide='ignore'):
+            cover = np.clip(0.5 + (0.3 - r) / foot, 0.0, 1.0)
+        plane = 0.85 - 0.6 * np.nan_to_num(cover)
+    else:
+        ds, hs = _px_dist(np.where(inside, s, 0.0), 0.55, 0.08)
+        dt, ht = _px_dist(np.where(inside, t, 0.0), 0.55, 0.08)
+        bars = np.maximum(np.nan_to_num(_ramp(ds, hs)), np.nan_to_num(_ramp(dt, ht)))
+        plane = 0.85 - 0.6 * bars
+    # The plane's own border, anti-aliased (a linear ramp one footprint wide).
+    box = np.where(hit, np.maximum(np.abs(s), np.abs(t)), 0.0)
+    foot = np.maximum(np.hypot(*np.gradient(box)), 1e-9)
+    edge = np.where(hit, np.clip(0.5 + (limit - box) / foot, 0.0, 1.0), 0.0)
+    img = img * (1 - edge) + np.nan_to_num(plane) * edge
+    return _finish(img, d)
+
+
+def _room_sample(d: np.ndarray) -> np.ndarray:
+    """Return the grey of each direction in the box room (no anti-aliasing)."""
+    lo = np.array([-2.0, -1.3, -3.0])
+    hi = np.array([2.6, 1.1, 3.5])
+    grey = np.array([0.3, 0.5, 0.7, 0.4, 0.6, 0.8])
+    best = np.full(d.shape[:-1], np.inf)
+    out = np.zeros(d.shape[:-1])
+    for axis in range(3):
+        with np.errstate(invalid='ignore', divide='ignore'):
+            for k, bound in enumerate((lo[axis], hi[axis])):
+                t = bound / d[..., axis]
+                ok = np.isfinite(t) & (t > 0) & (t < best)
+                point = d * t[..., None]
+                wall = grey[2 * axis + k]
+                # A dark door / window on each wall: a rectangle in the other two axes.
+                others = [a for a in range(3) if a != axis]
+                p0, p1 = point[..., others[0]], point[..., others[1]]
+                door = (np.abs(p0 - 0.3) < 0.6) & (np.abs(p1 + 0.2) < 0.5)
+                value = np.where(door, wall - 0.22, wall)
+                out = np.where(ok, value, out)
+                best = np.where(ok, t, best)
+    return out
+
+
+def box_room(lens: Lens, offset_px: tuple[float, float], yaw: float = 20.0,
+             pitch: float = -8.0) -> np.ndarray:
+    """Render a box room (walls, doors), 4 x 4 supersampled at its edges; an 8-bit frame."""
+    rot = _rot(yaw, pitch)
+    u, v = np.meshgrid(np.arange(lens.width, dtype=float), np.arange(lens.height, dtype=float))
+    d = lens.directions(u, v, offset_px)
+    img = np.nan_to_num(_room_sample(d @ rot.T))
+    # Supersample only where the grey changes within a pixel's neighbourhood.
+    kernel = np.ones((3, 3), np.uint8)
+    spread = (cv2.dilate(img.astype(np.float32), kernel)
+              - cv2.erode(img.astype(np.float32), kernel))
+    rows, cols = np.nonzero(spread > 0)
+    acc = np.zeros(rows.size)
+    for du in (-0.375, -0.125, 0.125, 0.375):
+        for dv in (-0.375, -0.125, 0.125, 0.375):
+            ds = lens.directions(cols + du, rows + dv, offset_px) @ rot.T
+            acc += np.nan_to_num(_room_sample(ds))
+    img[rows, cols] = acc / 16.0
+    return _finish(img, d)
+
+
+def discs(lens: Lens, offset_px: tuple[float, float], seed: int = 3) -> np.ndarray:
+    """Render dark circular spots, cones of directions seen along their axes; no lines."""
+    u, v = np.meshgrid(np.arange(lens.width, dtype=float), np.arange(lens.height, dtype=float))
+    d = lens.directions(u, v, offset_px)
+    rng = np.random.default_rng(seed)
+    img = np.full(u.shape, 0.75)
+    for _ in range(14):
+        theta, phi = rng.uniform(0.0, 1.3), rng.uniform(-math.pi, math.pi)
+        centre = np.array([math.sin(theta) * math.cos(phi), math.sin(theta) * math.sin(phi),
+                           math.cos(theta)])
+        angle = np.arccos(np.clip(np.nan_to_num(d @ centre), -1.0, 1.0))
+        foot = np.maximum(np.hypot(*np.gradient(angle)), 1e-9)
+        cover = np.clip(0.5 + (rng.uniform(0.08, 0.3) - angle) / foot, 0.0, 1.0)
+        img = img * (1 - cover) + 0.25 * cover
+    return _finish(img, d)
+
+
+def featureless(lens: Lens, noise: float = 6.0, seed: int = 1) -> np.ndarray:
+    """Return a flat frame with Gaussian noise (grey levels)."""
+    rng = np.random.default_rng(seed)
+    img = 120.0 + noise * rng.standard_normal((lens.height, lens.width))
+    return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+
+
+def _finish(img: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Black outside the field, blur, quantise to 8 bits with a little noise."""
+    img = np.where(np.isfinite(d[..., 2]), img, 0.0) * 255.0
+    img = cv2.GaussianBlur(img.astype(np.float32), (0, 0), BLUR_PX)
+    rng = np.random.default_rng(7)
+    img = img + 0.5 * rng.standard_normal(img.shape)
+    return np.clip(np.rint(img), 0, 255).astype(np.uint8)
