@@ -56,6 +56,7 @@ from mechdeconv_ros.lenses.lens_errors import FloatArray, half_diagonal_mm, Mode
 from mechdeconv_ros.lenses.lens_params import make_prescription
 from mechdeconv_ros.lenses.lens_source import LensSource
 from mechdeconv_ros.lenses.moving_source import source_for
+from mechdeconv_ros.lenses.port_source import has_port, PortedSource
 from mechdeconv_ros.model import lateral_color
 from mechdeconv_ros.model.camera_info_fit import (
     boundary_points, choose_equivalent, EQUIVALENT_MAX_ERROR_PX, EquivalentFit, fit_equivalent)
@@ -338,6 +339,20 @@ def _scale_k(boundary_ideal: FloatArray, disk: float, half_w: float, half_h: flo
     return float(k0 * (1.0 - alpha) + k1 * alpha)
 
 
+def _default_source(vals: Mapping[str, Any]) -> LensSource:
+    """Return the lens of the values: a datasheet table, a lens behind a port, or source_for."""
+    if is_table_mode(vals):
+        if has_port(vals):
+            name = 'port.type' if vals['port.type'] != 'none' else 'scene.medium'
+            raise ModelError(name, 'a datasheet lens (lens.datasheet.*) has no entrance pupil or '
+                                   'surfaces to trace through a port or water: give the lens '
+                                   'as a prescription (lens.surfaces.*) or import its .zmx')
+        return TableSource(vals)
+    if has_port(vals):
+        return PortedSource(vals)
+    return source_for(vals)
+
+
 def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
                 source: LensSource | None = None) -> LensModel:
     """
@@ -359,7 +374,7 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
         raise ModelError(name, str(err).split(':', 1)[-1].strip()) from None
     if source is None:
         # A datasheet table, a lens whose groups move, else the traced lens of the lens.* values.
-        source = TableSource(vals) if is_table_mode(vals) else source_for(vals)
+        source = _default_source(vals)
     # The rules of every source (paraxial), then the ones on its surfaces (docs/design.md s. 7).
     f, distance, sensor_z, v = refusals.check_first_order(vals, source)
     lateral_color.check_switch(vals)
