@@ -57,7 +57,7 @@ from mechdeconv_ros.lenses.lens_params import make_prescription
 from mechdeconv_ros.lenses.lens_source import LensSource
 from mechdeconv_ros.lenses.moving_source import source_for
 from mechdeconv_ros.lenses.port_source import has_port, PortedSource
-from mechdeconv_ros.model import lateral_color
+from mechdeconv_ros.model import lateral_color, underwater
 from mechdeconv_ros.model.camera_info_fit import (
     boundary_points, choose_equivalent, EQUIVALENT_MAX_ERROR_PX, EquivalentFit, fit_equivalent)
 from mechdeconv_ros.model.lateral_color import LateralColor
@@ -253,6 +253,7 @@ class LensModel:
             'relative_illumination': illumination,
             'lateral_color': colour,
         })
+        out.update(underwater.noncentral_errors(self))
         field = out.pop('_field_curve')
         theta, real = field['theta_rad'], field['real_mm']
         pick = np.unique(np.linspace(0, theta.size - 1, min(theta.size, 257)).round()

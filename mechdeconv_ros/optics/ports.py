@@ -192,7 +192,7 @@ def trace_scene_points(lens: Prescription, port: Port, medium_index: float,
         ray passes.
     """
     pts = np.asarray(points, dtype=float).reshape(-1, 3)
-    system = lens_system(lens, 0.0, stop_surface=None).without_semi_diameters()
+    system = lens_system(lens, 0.0, stop_surface=None)
     z_stop = float(lens.stop_z_mm)
 
     if start is None:
