@@ -52,6 +52,11 @@ def test_issue_contract_names_are_declared():
     # Issue 19: moving groups.
     contract += [f'lens.{m}.{k}' for m in ('zoom', 'focus')
                  for k in ('joint', 'positions', 'surfaces', 'thickness_mm')]
+    # Issue 25: the camera as assembled (sensor offset and tilt, and their tolerances).
+    contract += [f'sensor.{k}' for k in ('axis_offset_x_mm', 'axis_offset_y_mm', 'tilt_x_deg',
+                                         'tilt_y_deg')]
+    contract += [f'sensor.tolerance.{k}' for k in ('axis_offset_x_mm', 'axis_offset_y_mm',
+                                                   'tilt_x_deg', 'tilt_y_deg')]
     assert set(contract) <= set(params.SPECS)
     assert set(contract) == set(params.MODEL_PARAMS)
 

@@ -27,11 +27,13 @@ images on first use (no invented depths).
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Any, Sequence
 
 import cv2
 from mechdeconv_ros.imaging.channel_remap import ChannelRemap
+from mechdeconv_ros.model.assembly import curve_tables, MapForm
 from mechdeconv_ros.model.lateral_color import channel_model
 from mechdeconv_ros.model.model import LensModel
 from mechdeconv_ros.optics.illumination import Illumination
@@ -40,6 +42,8 @@ import numpy.typing as npt
 
 #: Where invalid output pixels point: far enough outside any source for BORDER_CONSTANT.
 _OUTSIDE = -1000.0
+#: Pixels per band of the off-centre/tilted maps (a band's dozen float32 arrays stay in L2).
+_BAND_PIXELS = 16384
 
 
 def _quadrant_scale(model: LensModel, xn: npt.NDArray[np.float32],
@@ -133,51 +137,239 @@ def build_gain_map(model: LensModel, illumination: Illumination, max_gain: float
     return _build_maps(model, _gain_table(model, illumination, max_gain))[2]
 
 
-def _mirror_quadrant(full: np.ndarray, quad: np.ndarray, c0: int, r0: int) -> None:
-    """Fill ``full`` from its lower-right quadrant ``quad`` by an even mirroring."""
-    oh, ow = full.shape
-    full[r0:, c0:] = quad
-    full[r0:, :c0] = quad[:, ow - 2 * c0:ow - c0][:, ::-1]
-    full[:r0] = full[oh - r0:oh][::-1]
+def _build_general_maps(model: LensModel, gain_table: npt.NDArray[np.float64] | None
+                        ) -> tuple[Map, Map, Map | None]:
+    """
+    Build the maps over the whole output without mirroring (float32 arithmetic).
+
+    For a principal point off the half-pixel grid or outside the output, which
+    :func:`~mechdeconv_ros.model.model.build_model` never makes; the same equations as
+    :func:`mechdeconv_ros.model.assembly.raw_from_normalised`.
+    """
+    ow, oh = model.out_width, model.out_height
+    form = MapForm.of(model)
+    curve = model.curve
+    xn = (np.arange(ow) - model.K_new[0, 2]) / model.K_new[0, 0]
+    yn = (np.arange(oh) - model.K_new[1, 2]) / model.K_new[1, 1]
+    ideal = np.hypot(xn[None, :], yn[:, None]) * form.v_mm
+    g, sigma = curve_tables(curve, form.v_mm)
+    q = np.interp(ideal, curve.ideal_mm, g * form.v_mm).astype(np.float32)
+    q[ideal > curve.valid_ideal_mm] = np.nan
+    sig = np.interp(ideal, curve.ideal_mm, sigma).astype(np.float32)
+    map_x, map_y = _plane_maps(form, xn, yn, q, sig)
+    gain = None
+    if gain_table is not None:
+        gain = np.interp(ideal, curve.ideal_mm, gain_table).astype(np.float32)
+        gain[map_x == np.float32(_OUTSIDE)] = 0.0
+    return map_x, map_y, gain
+
+
+def _mirror_plan(n: int, c: float) -> tuple[int, int, int] | None:
+    """
+    Return how an axis of ``n`` pixels mirrors about ``c``: ``(a, t, count)``, or None.
+
+    ``c`` must be a multiple of 1/2 within ``[-1/2, n - 1/2]``. The quadrant holds the
+    offsets ``d = (a - c) + i``, ``i < count`` (``a = ceil(c)``); pixel ``j >= a`` is its
+    entry ``j - a`` and pixel ``j < a`` its entry ``t + a - 1 - j`` (``t = 1`` when ``c`` is a
+    pixel centre, which is its own mirror image).
+    """
+    if 2.0 * c != round(2.0 * c) or not -0.5 <= c <= n - 0.5:
+        return None
+    a = math.ceil(c)
+    t = 1 if c == a else 0
+    return a, t, max(n - a, t + a)
+
+
+def _unfold(quad: np.ndarray, out: np.ndarray, rows: tuple[int, int, int],
+            cols: tuple[int, int, int], col_flip: float | None = None,
+            row_flip: float | None = None) -> None:
+    """
+    Fill ``out`` from its quadrant by mirroring (:func:`_mirror_plan`).
+
+    A value mirrored across the columns becomes ``col_flip - value`` (map_x: ``2 c_x - x``),
+    across the rows ``row_flip - value`` (map_y); None copies it unchanged.
+    """
+    oh, ow = out.shape
+    (ar, tr, _), (ac, tc, _) = rows, cols
+    parts = ((slice(ar, oh), slice(ac, ow), quad[:oh - ar, :ow - ac], False, False),
+             (slice(ar, oh), slice(0, ac), quad[:oh - ar, tc:tc + ac][:, ::-1], True, False),
+             (slice(0, ar), slice(ac, ow), quad[tr:tr + ar, :ow - ac][::-1], False, True),
+             (slice(0, ar), slice(0, ac), quad[tr:tr + ar, tc:tc + ac][::-1, ::-1], True,
+              True))
+    for rsl, csl, block, col_mirrored, row_mirrored in parts:
+        if block.size == 0:
+            continue
+        if col_mirrored and col_flip is not None:
+            np.subtract(np.float32(col_flip), block, out=out[rsl, csl])
+        elif row_mirrored and row_flip is not None:
+            np.subtract(np.float32(row_flip), block, out=out[rsl, csl])
+        else:
+            out[rsl, csl] = block
+
+
+def _quadrant_axes(model: LensModel) -> tuple[Any, Any, Any, Any] | None:
+    """Return the mirror plans and quadrant coordinates (xn, yn >= 0), or None."""
+    cols = _mirror_plan(model.out_width, float(model.K_new[0, 2]))
+    rows = _mirror_plan(model.out_height, float(model.K_new[1, 2]))
+    if cols is None or rows is None:
+        return None
+    xq = ((np.arange(cols[2]) + (cols[0] - model.K_new[0, 2])) / model.K_new[0, 0])
+    yq = ((np.arange(rows[2]) + (rows[0] - model.K_new[1, 2])) / model.K_new[1, 1])
+    return rows, cols, xq.astype(np.float32), yq.astype(np.float32)
 
 
 def _build_maps(model: LensModel, gain_table: npt.NDArray[np.float64] | None
                 ) -> tuple[Map, Map, Map | None]:
     """Build the float maps and, given a gain table over the curve's ideal radii, the gain."""
+    axes = _quadrant_axes(model)
+    if axes is None:
+        return _build_general_maps(model, gain_table)
+    rows, cols, xq, yq = axes
+    if MapForm.of(model).tilted:
+        return _build_tilted_maps(model, gain_table, rows, cols, xq, yq)
     ow, oh = model.out_width, model.out_height
     fx, fy, cx, cy = model.K[0, 0], model.K[1, 1], model.K[0, 2], model.K[1, 2]
-    xn = ((np.arange(ow) - model.K_new[0, 2]) / model.K_new[0, 0]).astype(np.float32)
-    yn = ((np.arange(oh) - model.K_new[1, 2]) / model.K_new[1, 1]).astype(np.float32)
-    # Output column u and ow-1-u have opposite xn (likewise rows): compute the lower-right
-    # quadrant, then mirror it: map_x(ow-1-u) = 2 c_x - map_x(u), and map_y likewise.
-    c0, r0 = ow // 2, oh // 2
+    # Output column u and 2 c'_x - u have opposite xn (likewise rows): compute the quadrant
+    # xn, yn >= 0, then mirror it: map_x(2 c'_x - u) = 2 c_x - map_x(u), and map_y likewise.
     gain = None
     if gain_table is None:
-        scale = _quadrant_scale(model, xn[c0:], yn[r0:])
+        scale = _quadrant_scale(model, xq, yq)
     else:
         # The gain depends on the ideal radius only, as s does: one look-up for both.
-        scale, quad_gain = _quadrant_scale(model, xn[c0:], yn[r0:], gain_table)
+        scale, quad_gain = _quadrant_scale(model, xq, yq, gain_table)
         gain = np.empty((oh, ow), np.float32)
-        _mirror_quadrant(gain, quad_gain, c0, r0)
+        _unfold(quad_gain, gain, rows, cols)
     invalid = scale < 0.0
-    map_x = np.empty((oh, ow), np.float32)
-    map_y = np.empty((oh, ow), np.float32)
-    quad_x = map_x[r0:, c0:]
-    quad_y = map_y[r0:, c0:]
-    np.multiply(scale, (xn[c0:] * np.float32(fx))[None, :], out=quad_x)
+    quad_x = np.multiply(scale, (xq * np.float32(fx))[None, :])
     quad_x += np.float32(cx)
-    np.multiply(scale, (yn[r0:] * np.float32(fy))[:, None], out=quad_y)
+    quad_y = np.multiply(scale, (yq * np.float32(fy))[:, None])
     quad_y += np.float32(cy)
     if invalid.any():
         # Far outside, and still outside after the mirroring (2 c - outside is far beyond).
         quad_x[invalid] = _OUTSIDE
         quad_y[invalid] = _OUTSIDE
-    np.subtract(np.float32(2.0 * cx), quad_x[:, ow - 2 * c0:ow - c0][:, ::-1],
-                out=map_x[r0:, :c0])
-    map_y[r0:, :c0] = quad_y[:, ow - 2 * c0:ow - c0][:, ::-1]
-    map_x[:r0] = map_x[oh - r0:oh][::-1]
-    np.subtract(np.float32(2.0 * cy), map_y[oh - r0:oh][::-1], out=map_y[:r0])
+    map_x = np.empty((oh, ow), np.float32)
+    map_y = np.empty((oh, ow), np.float32)
+    _unfold(quad_x, map_x, rows, cols, col_flip=2.0 * cx)
+    _unfold(quad_y, map_y, rows, cols, row_flip=2.0 * cy)
     return map_x, map_y, gain
+
+
+def _build_tilted_maps(model: LensModel, gain_table: npt.NDArray[np.float64] | None,
+                       rows: Any, cols: Any, xq: Any, yq: Any) -> tuple[Map, Map, Map | None]:
+    """
+    Build the maps of a tilted sensor: radial look-ups on the quadrant, the plane per pixel.
+
+    ``g`` and ``sigma`` (and the gain) depend on the ideal radius only: they are looked up on
+    the quadrant (one ``cv2.remap``, as the centred maps); the plane intersection
+    (:class:`~mechdeconv_ros.model.assembly.MapForm`) is not symmetric and runs per pixel, in
+    bands of rows that stay in cache, each band unfolding its rows of the quadrant first.
+    """
+    ow, oh = model.out_width, model.out_height
+    form = MapForm.of(model)
+    curve = model.curve
+    samples = len(curve.ideal_mm)
+    step = curve.valid_ideal_mm / (samples - 1)
+    g, sigma = curve_tables(curve, form.v_mm)
+    columns = [g * form.v_mm, sigma] + ([] if gain_table is None else [gain_table])
+    table = np.ascontiguousarray(np.repeat(np.stack(columns, axis=-1)[None], 2, axis=0),
+                                 dtype=np.float32)
+    scale = np.float32(form.v_mm / step)
+    index = np.add(np.square(xq * scale)[None, :], np.square(yq * scale)[:, None])
+    np.sqrt(index, out=index)
+    looked_up = cv2.remap(table, index, np.zeros(index.shape, np.float32), cv2.INTER_LINEAR,
+                          borderMode=cv2.BORDER_CONSTANT, borderValue=(0.0, 0.0, 0.0, 0.0))
+    channels = cv2.split(looked_up)
+    outside = index > samples - 1
+    if outside.any():
+        channels[0][outside] = np.nan
+    gain = None
+    if gain_table is not None:
+        gain = np.empty((oh, ow), np.float32)
+        _unfold(channels[2], gain, rows, cols)
+    xn = ((np.arange(ow) - model.K_new[0, 2]) / model.K_new[0, 0])
+    yn = ((np.arange(oh) - model.K_new[1, 2]) / model.K_new[1, 1])
+    map_x, map_y = _plane_maps(form, xn, yn, channels[0], channels[1], rows, cols)
+    if gain is not None:
+        np.putmask(gain, map_x == np.float32(_OUTSIDE), np.float32(0.0))
+    return map_x, map_y, gain
+
+
+def _plane_maps(form: MapForm, xn: Any, yn: Any, q: Map, sigma: Map, rows: Any = None,
+                cols: Any = None) -> tuple[Map, Map]:
+    """
+    Return the maps of the plane from ``q = g v`` and ``sigma`` (NaN q: invalid).
+
+    ``q`` and ``sigma`` are per output pixel, or their quadrants with the mirror plans
+    ``rows`` and ``cols`` (:func:`_mirror_plan`), unfolded a band at a time. The arithmetic
+    runs in bands of rows that stay in cache (about ten passes over each).
+    """
+    oh, ow = yn.size, xn.size
+    coefficients = tuple(np.asarray(c, dtype=np.float32) for c in (
+        xn * form.ax, yn * form.ay, xn * form.bx, yn * form.by, xn * form.nx, yn * form.ny))
+    map_x = np.empty((oh, ow), np.float32)
+    map_y = np.empty((oh, ow), np.float32)
+    band = max(1, min(oh, _BAND_PIXELS // max(ow, 1)))
+    quad_row = None
+    if rows is not None:
+        ar, tr, _ = rows
+        # The quadrant row of each output row (mirrored above the principal point).
+        line = np.arange(oh)
+        quad_row = np.where(line >= ar, line - ar, tr + ar - 1 - line)
+    _plane_bands(form, coefficients, q, sigma, quad_row, cols, map_x, map_y,
+                 list(range(0, oh, band)), band)
+    return map_x, map_y
+
+
+def _plane_bands(form: MapForm, coefficients: tuple[Any, ...], q: Map, sigma: Map,
+                 quad_row: Any, cols: Any, map_x: Map, map_y: Map, tops: list[int],
+                 band: int) -> None:
+    """Compute the bands of the plane maps that start at ``tops``."""
+    ax, ay, bx, by, lx, ly = coefficients
+    oh, ow = map_x.shape
+    cu, cv, nz = np.float32(form.cu), np.float32(form.cv), np.float32(form.nz)
+    work = np.empty((band, ow), np.float32)
+    if quad_row is not None:
+        q_band = np.empty((band, ow), np.float32)
+        s_band = np.empty((band, ow), np.float32)
+    for top in tops:
+        span = slice(top, min(oh, top + band))
+        n = span.stop - span.start
+        if quad_row is None:
+            qb, denominator = q[span], sigma[span]
+        else:
+            picked = quad_row[span]
+            qb, denominator = q_band[:n], s_band[:n]
+            _unfold_columns(q[picked], qb, cols)
+            _unfold_columns(sigma[picked], denominator, cols)
+        lin = work[:n]
+        np.add(lx[None, :], ly[span, None], out=lin)
+        denominator *= lin
+        denominator += nz
+        np.divide(qb, denominator, out=qb)
+        out_x, out_y = map_x[span], map_y[span]
+        np.add(ax[None, :], ay[span, None], out=out_x)
+        out_x *= qb
+        out_x += cu
+        np.add(bx[None, :], by[span, None], out=out_y)
+        out_y *= qb
+        out_y += cv
+        # NaN (outside the field) propagates into the sum; a line that does not meet the
+        # plane in front (denominator <= 0) is invalid too.
+        if not math.isfinite(float(np.add.reduce(out_x, axis=None))) or \
+                float(denominator.min()) <= 0.0:
+            invalid = ~np.isfinite(out_x) | ~(denominator > 0.0)
+            np.putmask(out_x, invalid, np.float32(_OUTSIDE))
+            np.putmask(out_y, invalid, np.float32(_OUTSIDE))
+
+
+def _unfold_columns(quad_rows: np.ndarray, out: np.ndarray, cols: tuple[int, int, int]) -> None:
+    """Fill rows of the output from the same rows of the quadrant, mirrored in columns."""
+    ow = out.shape[1]
+    ac, tc, _ = cols
+    out[:, ac:] = quad_rows[:, :ow - ac]
+    if ac:
+        out[:, :ac] = quad_rows[:, tc:tc + ac][:, ::-1]
 
 
 def _same_curve(a: Any, b: Any) -> bool:

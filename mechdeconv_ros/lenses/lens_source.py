@@ -49,7 +49,8 @@ from mechdeconv_ros.lenses.sensor_plane import blur_diameter_mm, sensor_plane, S
 from mechdeconv_ros.optics import illumination
 from mechdeconv_ros.optics.illumination import Illumination
 from mechdeconv_ros.optics.prescription import Paraxial, paraxial, Prescription, Surface, vertex_z
-from mechdeconv_ros.optics.raytrace import trace_field
+from mechdeconv_ros.optics.raytrace import trace_field_rays
+import numpy as np
 
 #: A sensor off the image plane is noted in the warnings when its blur circle is wider (px).
 DEFOCUS_WARNING_PX = 2.0
@@ -115,6 +116,28 @@ class LensSource(abc.ABC):
             per angle for later guides, or None.
         :raises ValueError: when the scene distance is impossible for this lens.
         """
+
+    def chief_lines(self, field_angle_rad: FloatArray, distance_mm: float,
+                    guide: Guide | None = None
+                    ) -> tuple[FloatArray, FloatArray, FloatArray | None]:
+        """
+        Return the image-space chief-ray lines of field angles: height and slope at the sensor.
+
+        The line of field angle theta, in its meridional plane, is ``rho(z) = h + s (z - z_s)``
+        (``h`` the real height on the sensor plane ``z_s`` as :meth:`real_heights`, ``s`` =
+        d rho / dz, both positive for a real inverted image spreading behind the lens): a tilted
+        sensor meets it off ``z_s``. By default (a source without rays: a datasheet table) the
+        line runs through the rear principal point, ``v`` in front of the sensor on the axis
+        (``s = h / v``): the pinhole's chief rays through the table's heights.
+
+        :param field_angle_rad: theta (rad), increasing from 0, 1-D.
+        :param distance_mm: scene distance l from H (``math.inf`` allowed).
+        :param guide: as :meth:`real_heights`.
+        :return: ``(heights_mm, slopes, state)``; NaN where no ray passes.
+        """
+        heights, state = self.real_heights(field_angle_rad, distance_mm, guide)
+        _, v = self.image_plane(distance_mm)
+        return heights, np.asarray(heights) / v, state
 
     def image_plane(self, distance_mm: float) -> tuple[float, float]:
         """
@@ -293,10 +316,16 @@ class TracedSource(LensSource):
     def real_heights(self, field_angle_rad: FloatArray, distance_mm: float,
                      guide: Guide | None = None) -> tuple[FloatArray, FloatArray]:
         """Trace the chief rays (the state is their aiming offsets; heights sign-flipped)."""
+        heights, _, offsets = self.chief_lines(field_angle_rad, distance_mm, guide)
+        return heights, offsets
+
+    def chief_lines(self, field_angle_rad: FloatArray, distance_mm: float,
+                    guide: Guide | None = None) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Trace the chief rays to the sensor plane: heights and slopes (sign-flipped)."""
         sensor_z, _ = self.image_plane(distance_mm)
-        real, offsets = trace_field(self._prescription, distance_mm, sensor_z,
-                                    field_angle_rad, guide)
-        return -real, offsets
+        rays, offsets = trace_field_rays(self._prescription, distance_mm, sensor_z,
+                                         field_angle_rad, guide)
+        return -rays.y, -rays.dy / rays.dz, offsets
 
     def pupil_scale(self) -> float:
         """Return entrance pupil / stop diameter (:func:`refusals.pupil_scale`)."""

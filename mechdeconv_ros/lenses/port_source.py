@@ -41,7 +41,7 @@ from mechdeconv_ros.optics.glass import GlassError, lookup
 from mechdeconv_ros.optics.ports import (
     entrance_pupil_z, Port, ported_prescription, trace_scene_points)
 from mechdeconv_ros.optics.prescription import paraxial, Prescription, vertex_z
-from mechdeconv_ros.optics.raytrace import trace_field
+from mechdeconv_ros.optics.raytrace import trace_field, trace_field_rays
 from mechdeconv_ros.optics.surfaces import sag
 from mechdeconv_ros.optics.water import SEAWATER_SALINITY_PSU, water_index, WaterError
 import numpy as np
@@ -291,13 +291,19 @@ class PortedSource(LensSource):
     def real_heights(self, field_angle_rad: FloatArray, distance_mm: float,
                      guide: Any = None) -> tuple[FloatArray, FloatArray]:
         """Trace the chief rays through medium, port and lens (symmetric port)."""
+        heights, _, offsets = self.chief_lines(field_angle_rad, distance_mm, guide)
+        return heights, offsets
+
+    def chief_lines(self, field_angle_rad: FloatArray, distance_mm: float,
+                    guide: Any = None) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Trace the chief rays to the sensor plane: heights and slopes (sign-flipped)."""
         sensor_z, _ = self.image_plane(distance_mm)
         if guide is not None:
             guide = (self._combined_angles(guide[0], distance_mm), guide[1])
-        real, offsets = trace_field(self.combined, self.combined_distance(distance_mm),
-                                    sensor_z, self._combined_angles(field_angle_rad,
-                                                                    distance_mm), guide)
-        return -real, offsets
+        rays, offsets = trace_field_rays(
+            self.combined, self.combined_distance(distance_mm), sensor_z,
+            self._combined_angles(field_angle_rad, distance_mm), guide)
+        return -rays.y, -rays.dy / rays.dz, offsets
 
     def heights_to_sensor(self, tan_theta: FloatArray, distance_mm: float,
                           sensor_z_mm: float) -> FloatArray:

@@ -47,7 +47,7 @@ from mechdeconv_ros.lenses.lens_errors import is_prescription_mode
 from mechdeconv_ros.lenses.lens_source import FloatArray, ModelError, Prescription, TracedSource
 from mechdeconv_ros.model.radial_map import hermite, RadialMap, resample, trace_angles
 from mechdeconv_ros.optics.glass import GlassError, lookup
-from mechdeconv_ros.optics.raytrace import trace_field
+from mechdeconv_ros.optics.raytrace import trace_field_rays
 import numpy as np
 
 #: A :class:`mechdeconv_ros.model.model.LensModel` (not imported: the model imports this module).
@@ -178,8 +178,8 @@ class ChannelSource(TracedSource):
         """Return the model's image plane: the sensor is where the lens was focused."""
         return self._base.image_plane(distance_mm)
 
-    def real_heights(self, field_angle_rad: FloatArray, distance_mm: float,
-                     guide: Any = None) -> tuple[FloatArray, FloatArray]:
+    def chief_lines(self, field_angle_rad: FloatArray, distance_mm: float,
+                    guide: Any = None) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Trace the channel's chief rays of the model's object points (module docstring)."""
         sensor_z, _ = self._base.image_plane(distance_mm)
         theta, distance_c = np.asarray(field_angle_rad, dtype=np.float64), distance_mm
@@ -187,8 +187,8 @@ class ChannelSource(TracedSource):
             distance_c += (self.first_order().front_principal_z_mm
                            - self._base.first_order().front_principal_z_mm)
             theta = np.arctan(np.tan(theta) * (distance_mm / distance_c))
-        real, offsets = trace_field(self.prescription, distance_c, sensor_z, theta, guide)
-        return -real, offsets
+        rays, offsets = trace_field_rays(self.prescription, distance_c, sensor_z, theta, guide)
+        return -rays.y, -rays.dy / rays.dz, offsets
 
 
 @dataclass(frozen=True)

@@ -48,6 +48,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 import math
+from types import SimpleNamespace
 from typing import Any, Mapping
 
 from mechdeconv_ros.lenses import refusals
@@ -58,6 +59,8 @@ from mechdeconv_ros.lenses.lens_source import LensSource
 from mechdeconv_ros.lenses.moving_source import source_for
 from mechdeconv_ros.lenses.port_source import has_port, PortedSource
 from mechdeconv_ros.model import lateral_color, underwater
+from mechdeconv_ros.model.assembly import (
+    axis_pixel, raw_from_normalised, SensorPose, unproject_angles)
 from mechdeconv_ros.model.camera_info_fit import (
     boundary_points, choose_equivalent, EQUIVALENT_MAX_ERROR_PX, EquivalentFit, fit_equivalent)
 from mechdeconv_ros.model.lateral_color import LateralColor
@@ -189,9 +192,7 @@ class LensModel:
         points_px = np.asarray(points_px, dtype=np.float64)
         xn = (points_px[..., 0] - self.K_new[0, 2]) / self.K_new[0, 0]
         yn = (points_px[..., 1] - self.K_new[1, 2]) / self.K_new[1, 1]
-        scale = self._scale(np.hypot(xn, yn) * self.image_distance_mm)
-        return np.stack([self.K[0, 2] + self.K[0, 0] * xn * scale,
-                         self.K[1, 2] + self.K[1, 1] * yn * scale], axis=-1)
+        return np.stack(raw_from_normalised(self, xn, yn), axis=-1)
 
     def rect_from_raw(self, points_px: FloatArray) -> FloatArray:
         """
@@ -201,6 +202,12 @@ class LensModel:
         :return: ``(..., 2)`` x, y in the corrected image; NaN outside the valid field.
         """
         points_px = np.asarray(points_px, dtype=np.float64)
+        if SensorPose.from_values(self.values).tilted:
+            theta, phi = unproject_angles(self, points_px[..., 0], points_px[..., 1])
+            radius = projected(theta, self.projection)
+            return np.stack([self.K_new[0, 2] + self.K_new[0, 0] * radius * np.cos(phi),
+                             self.K_new[1, 2] + self.K_new[1, 1] * radius * np.sin(phi)],
+                            axis=-1)
         x_mm = (points_px[..., 0] - self.K[0, 2]) * self.pixel_mm[0]
         y_mm = (points_px[..., 1] - self.K[1, 2]) * self.pixel_mm[1]
         real = np.hypot(x_mm, y_mm)
@@ -211,12 +218,6 @@ class LensModel:
         yn = y_mm * ratio / self.image_distance_mm
         return np.stack([self.K_new[0, 2] + self.K_new[0, 0] * xn,
                          self.K_new[1, 2] + self.K_new[1, 1] * yn], axis=-1)
-
-    def _scale(self, ideal_mm: FloatArray) -> FloatArray:
-        """Return ``rho_real / rho_ideal`` (1 on the axis); NaN outside the valid field."""
-        real = self.curve.real_from_ideal(ideal_mm)
-        with np.errstate(invalid='ignore', divide='ignore'):
-            return np.where(ideal_mm > 0.0, real / ideal_mm, 1.0)
 
     def report(self) -> dict[str, Any]:
         """
@@ -320,23 +321,29 @@ def _image_size(values: Mapping[str, Any], width: int, height: int) -> tuple[int
     return w, h, ow, oh
 
 
-def _scale_k(boundary_ideal: FloatArray, disk: float, half_w: float, half_h: float,
-             fx: float, fy: float, alpha: float) -> float:
+def _scale_k(boundary_ideal: FloatArray, principal: tuple[float, float], disk: float,
+             size: tuple[int, int], fx: float, fy: float, alpha: float) -> float:
     """
     Choose the zoom ``k`` of ``K_new`` from the raw image outline in ideal normalised coords.
 
-    ``alpha = 0``: the output shows only valid source pixels (inner rectangle of the outline,
-    and inside the valid disk); ``alpha = 1``: every source pixel is in view (outer rectangle).
+    The outline is relative to the lens axis, which the output puts at ``principal``. The
+    output of ``size`` (w, h) reaches ``(c' + 1/2) / (k f)`` left of the axis and
+    ``(w - 1/2 - c') / (k f)`` right of it (likewise up and down). ``alpha = 0``: the output
+    shows only valid source pixels (inside the outline's inner rectangle, and its corners
+    inside the valid disk); ``alpha = 1``: every source pixel is in view (outer rectangle).
     """
     x, y = boundary_ideal[:, 0], boundary_ideal[:, 1]
     n = len(x) // 4
     top, bottom, left, right = (slice(0, n), slice(n, 2 * n), slice(2 * n, 3 * n),
                                 slice(3 * n, 4 * n))
-    inner_x = min(-np.max(x[left]), np.min(x[right]))
-    inner_y = min(-np.max(y[top]), np.min(y[bottom]))
-    k0 = max(half_w / (fx * inner_x), half_h / (fy * inner_y),
-             math.hypot(half_w / fx, half_h / fy) / disk)
-    k1 = min(half_w / (fx * np.max(np.abs(x))), half_h / (fy * np.max(np.abs(y))))
+    reach = (principal[0] + 0.5, size[0] - 0.5 - principal[0],
+             principal[1] + 0.5, size[1] - 0.5 - principal[1])
+    corner = math.hypot(max(reach[0], reach[1]) / fx, max(reach[2], reach[3]) / fy)
+    k0 = max(reach[0] / (fx * -np.max(x[left])), reach[1] / (fx * np.min(x[right])),
+             reach[2] / (fy * -np.max(y[top])), reach[3] / (fy * np.min(y[bottom])),
+             corner / disk)
+    k1 = min(reach[0] / (fx * max(np.max(-x), 1e-300)), reach[1] / (fx * max(np.max(x), 1e-300)),
+             reach[2] / (fy * max(np.max(-y), 1e-300)), reach[3] / (fy * max(np.max(y), 1e-300)))
     return float(k0 * (1.0 - alpha) + k1 * alpha)
 
 
@@ -385,7 +392,9 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
     py = float(vals['sensor.pixel_size_y_um']) * 1e-3
     refusals.check_circle_of_confusion(vals, f, w * px, h * py)
     fx, fy = v / px, v / py
-    K = np.array([[fx, 0.0, (w - 1) / 2.0], [0.0, fy, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
+    # The principal point is where the lens axis meets the sensor (sensor.axis_offset_*).
+    cx, cy = axis_pixel(vals, w, h, (px, py))
+    K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
 
     projection = str(vals['output.projection'])
     cap = field_cap_rad(distance)
@@ -410,28 +419,45 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
                          f'{edge_real:.3g} mm half-diagonal: the stop position or the lens '
                          'blocks the field, or the sensor is far larger than the image the '
                          'lens forms')
+    # The raw image's outline and centre as ideal normalised coordinates (through the traced
+    # directions of their pixels: the sensor's offset and tilt included).
+    camera = SimpleNamespace(values=vals, K=K, pixel_mm=(px, py), field_curve=coarse,
+                             source=source)
     boundary = boundary_points(w, h)
-    bx = (boundary[:, 0] - K[0, 2]) * px
-    by = (boundary[:, 1] - K[1, 2]) * py
-    b_real = np.hypot(bx, by)
-    b_theta = coarse.angle_from_real(np.minimum(b_real, coarse.valid_real_mm))
-    ratio = projected(b_theta, projection) / b_real
-    boundary_ideal = np.stack([bx * ratio, by * ratio], axis=1)
+    b_theta, b_phi = unproject_angles(camera, boundary[:, 0], boundary[:, 1])
+    b_theta = np.where(np.isfinite(b_theta), b_theta, coarse.max_field_angle_rad)
+    b_radius = projected(b_theta, projection)
+    boundary_ideal = np.stack([b_radius * np.cos(b_phi), b_radius * np.sin(b_phi)], axis=1)
+    c_theta, c_phi = unproject_angles(camera, np.array([(w - 1) / 2.0]),
+                                      np.array([(h - 1) / 2.0]))
+    c_radius = projected(np.nan_to_num(c_theta), projection)
+    centre = (float(c_radius[0] * np.cos(c_phi[0])), float(c_radius[0] * np.sin(c_phi[0])))
     disk = float(projected(np.array(coarse.max_field_angle_rad), projection))
-    k = _scale_k(boundary_ideal, disk, ow / 2.0, oh / 2.0, fx, fy, float(vals['output.alpha']))
-    K_new = np.array([[k * fx, 0.0, (ow - 1) / 2.0], [0.0, k * fy, (oh - 1) / 2.0],
+    alpha = float(vals['output.alpha'])
+    # The corrected image frames the raw one: the raw centre's direction near its centre.
+    # The principal point (where the lens axis projects) is rounded to half a pixel, so the
+    # maps mirror about it (imaging/remap.py); the zoom is then chosen for that point.
+    middle = ((ow - 1) / 2.0, (oh - 1) / 2.0)
+    k = _scale_k(boundary_ideal - np.array(centre), middle, disk, (ow, oh), fx, fy, alpha)
+    principal = (round(2.0 * (middle[0] - k * fx * centre[0])) / 2.0,
+                 round(2.0 * (middle[1] - k * fy * centre[1])) / 2.0)
+    if principal != middle:
+        k = _scale_k(boundary_ideal, principal, disk, (ow, oh), fx, fy, alpha)
+    K_new = np.array([[k * fx, 0.0, principal[0]], [0.0, k * fy, principal[1]],
                       [0.0, 0.0, 1.0]])
 
     # Pass 2: the dense curve in the output projection from 0 to just past the output corner
     # (and the raw image edge).
-    out_corner = math.hypot(ow / 2.0 / (k * fx), oh / 2.0 / (k * fy)) * v
-    raw_corner_ideal = float(np.nanmax(ratio * b_real)) * v
+    out_corner = math.hypot(max(principal[0] + 0.5, ow - 0.5 - principal[0]) / (k * fx),
+                            max(principal[1] + 0.5, oh - 0.5 - principal[1]) / (k * fy)) * v
+    raw_corner_ideal = float(np.nanmax(np.hypot(*boundary_ideal.T))) * v
     reach = min(1.02 * max(out_corner, raw_corner_ideal), disk * v * 1.001)
     curve = resample(coarse, v, reach, CURVE_SAMPLES, projection)
 
     fits = fit_equivalent(coarse, v, K, w, h)
     chosen = choose_equivalent(fits)
-    disp = (boundary_ideal * v - np.stack([bx, by], axis=1)) / np.array([px, py])
+    # How far the lens moves the outline from where the pinhole K puts its directions.
+    disp = (boundary_ideal * np.array([fx, fy]) + K[:2, 2] - boundary)
     max_disp = float(np.nanmax(np.hypot(disp[:, 0], disp[:, 1])))
 
     model = LensModel(

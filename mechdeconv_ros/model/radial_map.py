@@ -59,6 +59,10 @@ class RadialMap:
     field_angle_rad: FloatArray | None = None
     folded: bool = False
     aim_offsets: FloatArray | None = None
+    #: The chief rays' image-space slopes d rho / dz at each sample
+    #: (:meth:`~mechdeconv_ros.lenses.lens_source.LensSource.chief_lines`): where a tilted
+    #: sensor meets them (:mod:`mechdeconv_ros.model.assembly`).
+    slope: FloatArray | None = None
 
     @property
     def valid_ideal_mm(self) -> float:
@@ -160,8 +164,8 @@ def _valid_prefix(source: LensSource, distance: float, ideal: FloatArray, theta:
     known = None
     if guide is not None and guide.aim_offsets is not None:
         known = (guide.field_angle_rad, guide.aim_offsets)
-    real, offsets = source.real_heights(theta, distance, known)
-    good = np.isfinite(real)
+    real, slope, offsets = source.chief_lines(theta, distance, known)
+    good = np.isfinite(real) & np.isfinite(slope)
     rising = np.ones_like(good)
     rising[1:] = np.diff(real) > 0.0
     good &= rising
@@ -169,7 +173,7 @@ def _valid_prefix(source: LensSource, distance: float, ideal: FloatArray, theta:
     end = int(np.argmin(good)) if not good.all() else theta.size
     folded = end < theta.size and bool(np.isfinite(real[end])) and not rising[end]
     return RadialMap(ideal[:end], real[:end], theta[:end], folded,
-                     None if offsets is None else offsets[:end])
+                     None if offsets is None else offsets[:end], slope[:end])
 
 
 def resample(field: RadialMap, v: float, ideal_max_mm: float, samples: int,
@@ -190,7 +194,13 @@ def resample(field: RadialMap, v: float, ideal_max_mm: float, samples: int,
     good = np.isfinite(real)
     good[1:] &= np.diff(real) > 0.0
     end = int(np.argmin(good)) if not good.all() else samples
-    return RadialMap(ideal[:end], real[:end], theta[:end], field.folded and end == samples)
+    slope = None
+    if field.slope is not None and field.field_angle_rad.size >= 5:
+        slope = np.full(samples, np.nan)
+        slope[inside] = hermite(field.field_angle_rad, field.slope, theta[inside])
+        slope = slope[:end]
+    return RadialMap(ideal[:end], real[:end], theta[:end], field.folded and end == samples,
+                     slope=slope)
 
 
 def hermite(x: FloatArray, y: FloatArray, query: FloatArray) -> FloatArray:

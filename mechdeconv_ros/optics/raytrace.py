@@ -46,13 +46,8 @@ __all__ = [
     'AFOCAL_POWER_PER_MM', 'BACKWARD_TOLERANCE_MM', 'finite_number', 'image_plane', 'paraxial',
     'Paraxial', 'Prescription', 'Rays', 'refract', 'Surface', 'trace_surfaces',
     'transfer_to_plane', 'vertex_z',
-    'aim_chief_rays', 'radial_map', 'trace_chief_rays', 'trace_field', 'trace_field_angles']
-
-__all__ = [
-    'AFOCAL_POWER_PER_MM', 'BACKWARD_TOLERANCE_MM', 'finite_number', 'image_plane', 'paraxial',
-    'Paraxial', 'Prescription', 'Rays', 'refract', 'Surface', 'trace_surfaces',
-    'transfer_to_plane', 'vertex_z',
-    'aim_chief_rays', 'radial_map', 'trace_chief_rays', 'trace_field', 'trace_field_angles']
+    'aim_chief_rays', 'radial_map', 'trace_chief_rays', 'trace_field', 'trace_field_angles',
+    'trace_field_rays']
 
 #: Ray aiming converges when |y_stop| <= STOP_TOLERANCE_MM (tighter for small fields).
 STOP_TOLERANCE_MM = 1e-10
@@ -470,6 +465,29 @@ def trace_field(prescription: Prescription, object_distance_mm: float, sensor_z_
     :return: ``(heights_mm, offsets)``, NaN where the trace fails.
     :raises ValueError: as :func:`aim_chief_rays`.
     """
+    image, offsets = trace_field_rays(prescription, object_distance_mm, sensor_z_mm,
+                                      field_angle_rad, guide)
+    return image.y, offsets
+
+
+def trace_field_rays(prescription: Prescription, object_distance_mm: float,
+                     sensor_z_mm: float, field_angle_rad: np.ndarray,
+                     guide: tuple[np.ndarray, np.ndarray] | None = None
+                     ) -> tuple[Rays, np.ndarray]:
+    """
+    Return the image-space chief rays at the sensor plane, and their aiming offsets.
+
+    As :func:`trace_field`, keeping each ray's direction (``dy``, ``dz``): the image-space line
+    of the chief ray, which a tilted sensor meets off the plane ``z = sensor_z_mm``.
+
+    :param prescription: the lens.
+    :param object_distance_mm: l from H (``math.inf`` allowed).
+    :param sensor_z_mm: z of the plane the rays are moved to.
+    :param field_angle_rad: theta in rad, 1-D.
+    :param guide: ``(theta_rad, offsets)`` of an earlier trace.
+    :return: ``(rays, offsets)``, NaN where the trace fails.
+    :raises ValueError: as :func:`aim_chief_rays`.
+    """
     theta = np.asarray(field_angle_rad, dtype=float).ravel()
     problem = _ChiefRayProblem(prescription, object_distance_mm)
     field = _field_variable(problem, None, theta)
@@ -480,8 +498,7 @@ def trace_field(prescription: Prescription, object_distance_mm: float, sensor_z_
     else:
         offsets = _aim_continued(problem, field, _guide(problem, guide))
         rays = problem.object_rays(offsets, field)
-    image = transfer_to_plane(trace_surfaces(prescription, rays), float(sensor_z_mm))
-    return image.y, offsets
+    return transfer_to_plane(trace_surfaces(prescription, rays), float(sensor_z_mm)), offsets
 
 
 def trace_chief_rays(prescription: Prescription, object_distance_mm: float, sensor_z_mm: float,

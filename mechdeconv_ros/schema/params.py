@@ -194,6 +194,11 @@ UNDERWATER_SPECS: tuple[ParamSpec, ...] = (
 MAX_FRAME_PIXELS = 8192 * 8192
 #: Largest width or height, in pixels, of an output or input frame.
 MAX_SIDE_PX = 16384
+#: Largest |sensor.axis_offset_*_mm|: beyond any sensor a model accepts (the axis must meet
+#: the sensor: the model refuses an offset past its edge).
+MAX_AXIS_OFFSET_MM = 100.0
+#: Largest |sensor.tilt_*_deg|: an assembly error, not a tilt-shift or Scheimpflug mount.
+MAX_TILT_DEG = 10.0
 
 SCHEMA: tuple[ParamSpec, ...] = (
     # --- lens: the paper's thick lens (two spherical surfaces) ---
@@ -293,6 +298,32 @@ SCHEMA: tuple[ParamSpec, ...] = (
        0, MAX_SIDE_PX),
     _i('sensor.height_px', 0, 'px',
        'Sensor height p_r,y; 0 = take it from the incoming images.', 0, MAX_SIDE_PX),
+    # --- sensor: the camera as assembled (issue 25) ---
+    _d('sensor.axis_offset_x_mm', 0.0, 'mm',
+       'Where the optical axis meets the sensor, along the rows from the sensor centre: the '
+       'axis is at pixel u = (W - 1) / 2 + this / p_x (datasheet "optical centre offset").',
+       -MAX_AXIS_OFFSET_MM, MAX_AXIS_OFFSET_MM),
+    _d('sensor.axis_offset_y_mm', 0.0, 'mm',
+       'Where the optical axis meets the sensor, down the columns from the sensor centre: '
+       'the axis is at pixel v = (H - 1) / 2 + this / p_y.',
+       -MAX_AXIS_OFFSET_MM, MAX_AXIS_OFFSET_MM),
+    _d('sensor.tilt_x_deg', 0.0, 'deg',
+       'Sensor tilt about its row line through the axis point; > 0 brings the rows of larger '
+       'v closer to the lens (on-axis image distance unchanged).',
+       -MAX_TILT_DEG, MAX_TILT_DEG),
+    _d('sensor.tilt_y_deg', 0.0, 'deg',
+       'Sensor tilt about its (tilted) column line through the axis point, applied after '
+       'tilt_x as a Zemax coordinate break; > 0 brings the columns of larger u closer.',
+       -MAX_TILT_DEG, MAX_TILT_DEG),
+    _d('sensor.tolerance.axis_offset_x_mm', 0.02, 'mm',
+       '1-sigma assembly tolerance of sensor.axis_offset_x_mm (info: the pixel sigma it '
+       'causes at the corner).', 0.0, 10.0),
+    _d('sensor.tolerance.axis_offset_y_mm', 0.02, 'mm',
+       '1-sigma assembly tolerance of sensor.axis_offset_y_mm.', 0.0, 10.0),
+    _d('sensor.tolerance.tilt_x_deg', 0.2, 'deg',
+       '1-sigma assembly tolerance of sensor.tilt_x_deg.', 0.0, 10.0),
+    _d('sensor.tolerance.tilt_y_deg', 0.2, 'deg',
+       '1-sigma tolerance of sensor.tilt_y_deg.', 0.0, 10.0),
     # --- scene ---
     _d('scene.distance_mm', 1000.0, 'mm',
        'Distance l from the front principal plane to the scene; 0 = infinity.', 0.0, 1.0e9),

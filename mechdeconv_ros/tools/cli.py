@@ -9,6 +9,7 @@ Commands::
     mechdeconv correct --params FILE [--bayer PATTERN] IN OUT   (an image, or a folder)
     mechdeconv plot --params FILE OUT.png
     mechdeconv camera-info --params FILE [--width W --height H]
+    mechdeconv project --params FILE [--width W --height H] IN.csv   (tx,ty -> tx,ty,u,v)
     mechdeconv vignetting --params FILE [--png OUT.png] [--lensfun]
     mechdeconv import LENS.zmx -o lens.yaml [--wavelength-nm NM]
     mechdeconv import TABLE.csv --focal-length-mm F -o lens.yaml
@@ -243,6 +244,51 @@ def cmd_camera_info(args: argparse.Namespace) -> int:
     return 0
 
 
+def read_directions(path: str) -> np.ndarray:
+    """
+    Read ``tx,ty`` lines (blank lines and ``#`` comments skipped) into an ``(N, 2)`` array.
+
+    :param path: the CSV file, ``-`` for standard input.
+    :return: the directions.
+    :raises UsageError: naming the file and line of anything else.
+    """
+    try:
+        stream = sys.stdin if path == '-' else open(path, encoding='utf-8')
+    except OSError as err:
+        raise UsageError(f'{path}: cannot read it: {err.strerror}') from None
+    rows = []
+    with stream:
+        for number, line in enumerate(stream, 1):
+            text = line.split('#', 1)[0].strip()
+            if not text:
+                continue
+            parts = [p.strip() for p in text.split(',')]
+            try:
+                if len(parts) != 2:
+                    raise ValueError
+                row = [float(parts[0]), float(parts[1])]
+            except ValueError:
+                raise UsageError(f'{path}:{number}: expected "tx,ty" (two numbers), got '
+                                 f'{text[:60]!r}') from None
+            if not all(np.isfinite(row)):
+                raise UsageError(f'{path}:{number}: tx and ty must be finite, got {text!r}')
+            rows.append(row)
+    return np.array(rows, dtype=np.float64).reshape(-1, 2)
+
+
+def cmd_project(args: argparse.Namespace) -> int:
+    """Project scene directions (tx, ty) to raw pixels (u, v): the traced camera."""
+    from mechdeconv_ros.model.assembly import project
+
+    directions = read_directions(args.input)
+    model = _model(args)
+    u, v = project(model, directions[:, 0], directions[:, 1])
+    out = sys.stdout
+    for (tx, ty), col, row in zip(directions, u, v):
+        out.write(f'{float(tx)!r},{float(ty)!r},{float(col)!r},{float(row)!r}\n')
+    return 0
+
+
 def _read(path: Path) -> np.ndarray:
     import cv2
     image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
@@ -406,6 +452,11 @@ def build_parser() -> argparse.ArgumentParser:
     info.set_defaults(func=cmd_info)
     add('camera-info', 'print camera_calibration_parsers YAML of the raw camera',
         True).set_defaults(func=cmd_camera_info)
+    project = add('project', 'project scene directions (lines tx,ty) to raw pixels: prints '
+                             'tx,ty,u,v (nan where no chief ray passes the lens)', True)
+    project.add_argument('input', help='CSV of tx,ty (tangents X/Z, Y/Z in the optical '
+                                       'frame); - for standard input')
+    project.set_defaults(func=cmd_project)
     correct = add('correct', 'correct an image, or every image of a folder', False)
     correct.add_argument('--bayer', choices=BAYER_PATTERNS, metavar='PATTERN',
                          help='the inputs are raw Bayer mosaics with this 2x2 tile (rggb, bggr, '
