@@ -41,6 +41,7 @@ import time
 from typing import Any
 
 from mechdeconv_ros.model.model import build_model
+from mechdeconv_ros.optics.ports import trace_scene_points
 from mechdeconv_ros.schema.params import load_params_file
 import numpy as np
 
@@ -222,6 +223,12 @@ def trace_case(key: str, lens: str, overrides: dict[str, Any]) -> dict[str, Any]
     z_h = source.first_order().front_principal_z_mm
     z_scene = z_h - distance + source.shift_mm      # combined frame
     sensor_z = source.image_plane(distance)[0]
+    # Only the directions our model sees (a flat port ends a wide lens's field near the
+    # critical angle): optiland traces those (the others are stored as null).
+    from mechdeconv_ros.model.underwater import project_points
+    valid = np.isfinite(project_points(model, tx, ty)[0])
+    tx_all, ty_all = tx, ty
+    tx, ty = tx[valid], ty[valid]
     x_obj, y_obj = tx * distance, ty * distance
     field_max = float(np.max(np.hypot(x_obj, y_obj))) * 1.01
     tilted = port is not None and port.kind == 'flat' and not port.symmetric
@@ -232,18 +239,43 @@ def trace_case(key: str, lens: str, overrides: dict[str, Any]) -> dict[str, Any]
         else:
             optic = build_optic(source, port, sensor_z, -z_scene,
                                 source.wavelength_nm / 1000.0, sign, field_max)
-        optic.ray_tracer.set_aiming('iterative', max_iter=50, tol=1e-11)
-        rays = optic.trace_generic(x_obj / field_max, y_obj / field_max, 0 * tx, 0 * tx,
-                                   source.wavelength_nm / 1000.0)
+        aimer = 'iterative'
+        try:
+            if lens != 'cooke':
+                raise ValueError('wide lenses: the real-ray Newton (robust takes minutes)')
+            optic.ray_tracer.set_aiming(aimer, max_iter=50, tol=1e-11)
+            rays = optic.trace_generic(x_obj / field_max, y_obj / field_max, 0 * tx, 0 * tx,
+                                       source.wavelength_nm / 1000.0)
+        except ValueError:
+            aimer = 'real-ray Newton from our chief rays'
+            rays = None
         surfaces = list(optic.surfaces)
         stop = optic.surfaces.stop_index
 
         def at(i: int, name: str) -> np.ndarray:
             return np.array(getattr(surfaces[i], name), dtype=float).reshape(-1)
 
-        x_img, y_img = np.array(rays.x, dtype=float), np.array(rays.y, dtype=float)
-        residual = np.hypot(at(stop, 'x'), at(stop, 'y'))
-        if port is not None and port.kind == 'dome' and not port.symmetric:
+        if rays is None:
+            # optiland's aimers fail (iterative) or take minutes (robust) on the wide lenses:
+            # optiland's own real-ray trace is aimed by a 2-D Newton (aim_real) from our chief
+            # rays' directions; the solution is where optiland's ray meets the stop centre
+            # (1e-12 mm), whatever the start.
+            pts = np.stack([x_obj, y_obj, np.full(x_obj.shape, z_scene - source.shift_mm)],
+                           axis=1)
+            _, slopes = trace_scene_points(
+                source.lens.prescription, port, source.medium_index, pts,
+                source.sensor_z_lens_frame(distance),
+                source.symmetric_slopes(tx, ty, distance), with_slopes=True)
+            if port is not None and port.kind == 'dome' and not port.symmetric:
+                decentre(optic, port)
+            z_object = float(optic.surfaces[0].geometry.cs.z)     # optiland's frame
+            x_img, y_img, residual = aim_real(optic, x_obj, y_obj, z_object, slopes,
+                                              source.wavelength_nm / 1000.0)
+        else:
+            x_img, y_img = np.array(rays.x, dtype=float), np.array(rays.y, dtype=float)
+            residual = np.hypot(at(stop, 'x'), at(stop, 'y'))
+        if rays is not None and port is not None and port.kind == 'dome' \
+                and not port.symmetric:
             # From the centred dome's chief rays (optiland's aimer), aim the decentred ones.
             n0 = at(0, 'N')
             slopes = np.stack([at(0, 'L') / n0, at(0, 'M') / n0], axis=1)
@@ -251,6 +283,8 @@ def trace_case(key: str, lens: str, overrides: dict[str, Any]) -> dict[str, Any]
             x_img, y_img, residual = aim_real(optic, at(0, 'x'), at(0, 'y'),
                                               float(at(0, 'z')[0]), slopes,
                                               source.wavelength_nm / 1000.0)
+        if rays is None:
+            surfaces = list(optic.surfaces)
         # The inner face (optiland surface 2): where the rays meet it, and its axis point.
         axis_z = float(surfaces[2].geometry.cs.z)
         results[sign] = (x_img, y_img, residual, at(2, 'x'), at(2, 'y'), at(2, 'z') - axis_z)
@@ -270,12 +304,15 @@ def trace_case(key: str, lens: str, overrides: dict[str, Any]) -> dict[str, Any]
     ok = np.isfinite(x_img) & np.isfinite(y_img) & (residual < 1e-8)
     # Our read-out pixels of optiland's rays: the inverted image turned upright.
     px, py = model.pixel_mm
-    u = model.K[0, 2] - x_img / px
-    v = model.K[1, 2] - y_img / py
-    return {'lens': lens, 'overrides': overrides, 'rx_sign': sign,
-            'tx': tx.tolist(), 'ty': ty.tolist(),
-            'u': [round(float(a), 6) if k else None for a, k in zip(u, ok)],
-            'v': [round(float(a), 6) if k else None for a, k in zip(v, ok)],
+    u = np.full(tx_all.shape, np.nan)
+    v = np.full(tx_all.shape, np.nan)
+    u[valid] = np.where(ok, model.K[0, 2] - x_img / px, np.nan)
+    v[valid] = np.where(ok, model.K[1, 2] - y_img / py, np.nan)
+    ok_all = np.isfinite(u)
+    return {'lens': lens, 'overrides': overrides, 'rx_sign': sign, 'aimer': aimer,
+            'tx': tx_all.tolist(), 'ty': ty_all.tolist(),
+            'u': [round(float(a), 6) if k else None for a, k in zip(u, ok_all)],
+            'v': [round(float(a), 6) if k else None for a, k in zip(v, ok_all)],
             'max_stop_residual_mm': float(np.nanmax(np.where(ok, residual, np.nan)))
             if ok.any() else None,
             'medium_index': source.medium_index,

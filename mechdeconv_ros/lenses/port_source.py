@@ -41,7 +41,7 @@ from mechdeconv_ros.optics.glass import GlassError, lookup
 from mechdeconv_ros.optics.ports import (
     entrance_pupil_z, Port, ported_prescription, trace_scene_points)
 from mechdeconv_ros.optics.prescription import paraxial, Prescription, vertex_z
-from mechdeconv_ros.optics.raytrace import trace_field, trace_field_rays
+from mechdeconv_ros.optics.raytrace import aim_chief_rays, trace_field, trace_field_rays
 from mechdeconv_ros.optics.surfaces import sag
 from mechdeconv_ros.optics.water import SEAWATER_SALINITY_PSU, water_index, WaterError
 import numpy as np
@@ -339,8 +339,31 @@ class PortedSource(LensSource):
                            np.full(tx.size, z_scene)], axis=1)
         port = self.port if self.port is not None else Port('flat', 0.0, 1.0, distance_mm=0.0)
         out = trace_scene_points(self.lens.prescription, port, self.medium_index, points,
-                                 self.sensor_z_lens_frame(distance_mm))
+                                 self.sensor_z_lens_frame(distance_mm),
+                                 self.symmetric_slopes(tx.ravel(), ty.ravel(), distance_mm))
         return -out[:, 0].reshape(tx.shape), -out[:, 1].reshape(tx.shape)
+
+    def symmetric_slopes(self, tx: FloatArray, ty: FloatArray,
+                         distance_mm: float) -> np.ndarray:
+        """
+        Return the slopes in the medium of the symmetric port's chief rays (the 3-D start).
+
+        The meridional chief ray of the point's field (aimed with continuation, so a wide
+        lens converges) turned to the point's azimuth: (k_x, k_y) / k_z = s (cos phi, sin phi).
+
+        :return: ``(N, 2)``.
+        """
+        radius = np.hypot(tx, ty)
+        order = np.argsort(radius, kind='stable')
+        theta = self._combined_angles(np.arctan(radius[order]), distance_mm)
+        rays = aim_chief_rays(self.combined, self.combined_distance(distance_mm),
+                              field_angle_rad=theta)
+        slope = np.empty(radius.shape)
+        slope[order] = rays.dy / rays.dz
+        phi = np.arctan2(ty, tx)
+        # The meridional ray of a point above the axis runs down toward it (dy < 0): in 3-D
+        # toward the axis from the point's azimuth.
+        return np.stack([slope * np.cos(phi), slope * np.sin(phi)], axis=1)
 
     # --- the rest of the seam ---
     @property

@@ -177,7 +177,8 @@ def _through_port(port: Port, medium_index: float, p: tuple[np.ndarray, ...],
 
 def trace_scene_points(lens: Prescription, port: Port, medium_index: float,
                        points: np.ndarray, sensor_z_mm: float,
-                       start: np.ndarray | None = None) -> np.ndarray:
+                       start: np.ndarray | None = None, *,
+                       with_slopes: bool = False) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """
     Return where the chief rays of scene points cross the sensor plane (exact, 3-D).
 
@@ -188,8 +189,9 @@ def trace_scene_points(lens: Prescription, port: Port, medium_index: float,
     :param sensor_z_mm: z of the sensor plane (lens frame).
     :param start: ``(N, 2)`` starting slopes (k_x / k_z, k_y / k_z) of the aiming; default
         the line toward the paraxial entrance pupil.
+    :param with_slopes: also return the chief rays' slopes in the medium.
     :return: ``(N, 2)`` physical x, y on the sensor (mm; inverted image), NaN where no chief
-        ray passes.
+        ray passes; with ``with_slopes``, also the ``(N, 2)`` slopes (k_x / k_z, k_y / k_z).
     """
     pts = np.asarray(points, dtype=float).reshape(-1, 3)
     system = lens_system(lens, 0.0, stop_surface=None)
@@ -243,7 +245,7 @@ def trace_scene_points(lens: Prescription, port: Port, medium_index: float,
         s = (sensor_z_mm - z) / kz
         out = np.stack([x + s * kx, y + s * ky], axis=1)
     out[~(ok & passed & (kz > 0))] = np.nan
-    return out
+    return (out, slopes) if with_slopes else out
 
 
 def _prefix(system: System, z_stop: float) -> System:
