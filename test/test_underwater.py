@@ -166,3 +166,24 @@ def test_water_dispersion_gives_lateral_colour() -> None:
     values.update({**FLAT, 'output.lateral_color_correction': True})
     model = build_model(values)
     assert model.lateral_color().max_rb_separation_px > 1.0
+
+
+def test_zmx_object_in_water(tmp_path: Path) -> None:
+    from mechdeconv_ros.lenses.lens_import import import_zmx
+    from mechdeconv_ros.lenses.zmx import LensImportError
+    from mechdeconv_ros.optics.water import water_index
+
+    text = (ROOT / 'test' / 'data' / 'zmx' / 'edmund_55278.zmx').read_text('utf-16')
+    for glass, salinity in (('WATER', 0.0), ('SEAWATER', 35.0)):
+        path = tmp_path / f'{glass}.zmx'
+        path.write_text(text.replace('SURF 0\n', f'SURF 0\n  GLAS {glass} 0 0 1.333 55.0\n',
+                                     1), 'utf-8')
+        imported = import_zmx(path, 550.0)
+        assert imported.values['scene.medium_index'] == pytest.approx(
+            water_index(550.0, 20.0, salinity))
+        assert any('object space is' in w for w in imported.warnings)
+    path = tmp_path / 'oil.zmx'
+    path.write_text(text.replace('SURF 0\n', 'SURF 0\n  GLAS N-BK7 0 0 1.5 60.0\n', 1),
+                    'utf-8')
+    with pytest.raises(LensImportError, match='water glass it can name'):
+        import_zmx(path, 550.0)

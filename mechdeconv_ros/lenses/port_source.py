@@ -213,6 +213,13 @@ class PortedSource(LensSource):
         self.wavelength_nm = wavelength
         self.medium_index = medium_index(values, wavelength)
         self.port = port_from_values(values, lens.prescription, wavelength)
+        if self.port is not None and not self.port.symmetric and (
+                float(values.get('sensor.tilt_x_deg', 0.0))
+                or float(values.get('sensor.tilt_y_deg', 0.0))):
+            name = 'port.tilt_x_deg' if self.port.kind == 'flat' else 'port.decenter_x_mm'
+            raise ModelError(name, 'a tilted flat port or a decentred dome with a tilted sensor '
+                                   '(sensor.tilt_*_deg) is not traced yet: one of them must be '
+                                   'square to the lens axis')
         air_lens = lens.prescription
         if self.port is None:
             self.combined = Prescription(air_lens.surfaces, air_lens.stop_z_mm,
