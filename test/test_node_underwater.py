@@ -13,7 +13,6 @@ never a mix; /diagnostics reports the non-central error.
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Iterator
 
 from mechdeconv_ros.imaging.remap import Rectifier

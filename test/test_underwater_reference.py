@@ -43,13 +43,23 @@ def case_values(case: dict) -> dict:
     return values
 
 
+def directions(case: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Return the grid of directions of a case, row-major (ty outer)."""
+    grid = case['grid']
+    tx, ty = np.meshgrid(
+        np.linspace(-grid['half_tx'], grid['half_tx'], grid['n'])[::grid['step']],
+        np.linspace(-grid['half_ty'], grid['half_ty'], grid['n'])[::grid['step']])
+    return tx.ravel(), ty.ravel()
+
+
 def errors(case: dict) -> tuple[np.ndarray, int]:
     """Return our distances from optiland's pixels (px) and how many rays optiland has."""
     model = build_model(case_values(case))
     u_ref = np.array([np.nan if u is None else u for u in case['u']])
     v_ref = np.array([np.nan if v is None else v for v in case['v']])
     keep = np.isfinite(u_ref)
-    u, v = project_points(model, np.array(case['tx'])[keep], np.array(case['ty'])[keep])
+    tx, ty = directions(case)
+    u, v = project_points(model, tx[keep], ty[keep])
     return np.hypot(u - u_ref[keep], v - v_ref[keep]), int(keep.sum())
 
 

@@ -30,8 +30,8 @@ def test_published_values() -> None:
     # higher than red (the water's own lateral colour).
     assert water_index(550.0, 25.0, 35.0) - water_index(550.0, 25.0, 0.0) == pytest.approx(
         0.0064, abs=3e-4)
-    assert water_index(550.0, 25.0) - water_index(550.0, 5.0) == pytest.approx(-0.0014,
-                                                                              abs=3e-4)
+    heat = water_index(550.0, 25.0) - water_index(550.0, 5.0)
+    assert heat == pytest.approx(-0.0014, abs=3e-4)
     assert water_index(650.0, 25.0, 35.0) - water_index(450.0, 25.0, 35.0) == pytest.approx(
         -0.0079, abs=4e-4)
 

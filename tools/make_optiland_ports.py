@@ -71,8 +71,8 @@ def cases() -> list[tuple[str, str, dict[str, Any], bool]]:
             out.append((f'{lens}_flat_t{t:g}_bk7_fresh', lens,
                         {**flat, **FRESH, 'port.thickness_mm': t, 'port.glass': 'N-BK7'}, False))
         for dist in (300.0, 3000.0):
-            out.append((f'{lens}_flat_l{dist:g}', lens, {**flat, **SEA,
-                                                          'scene.distance_mm': dist}, False))
+            out.append((f'{lens}_flat_l{dist:g}', lens,
+                        {**flat, **SEA, 'scene.distance_mm': dist}, False))
         out.append((f'{lens}_flat_tilt_x1', lens, {**flat, **SEA, 'port.tilt_x_deg': 1.0},
                     False))
         out.append((f'{lens}_flat_tilt_y1', lens, {**flat, **SEA, 'port.tilt_y_deg': 1.0},
@@ -311,8 +311,8 @@ def trace_case(key: str, lens: str, overrides: dict[str, Any]) -> dict[str, Any]
     ok_all = np.isfinite(u)
     return {'lens': lens, 'overrides': overrides, 'rx_sign': sign, 'aimer': aimer,
             'tx': tx_all.tolist(), 'ty': ty_all.tolist(),
-            'u': [round(float(a), 6) if k else None for a, k in zip(u, ok_all)],
-            'v': [round(float(a), 6) if k else None for a, k in zip(v, ok_all)],
+            'u': [float(a) if k else None for a, k in zip(u, ok_all)],
+            'v': [float(a) if k else None for a, k in zip(v, ok_all)],
             'max_stop_residual_mm': float(np.nanmax(np.where(ok, residual, np.nan)))
             if ok.any() else None,
             'medium_index': source.medium_index,
@@ -374,11 +374,17 @@ def main(argv: list[str] | None = None) -> int:
             continue
         record = trace_case(key, lens, overrides)
         keep = list(range(GRID * GRID)) if full else keep_sub
-        for name in ('tx', 'ty', 'u', 'v'):
-            record[name] = [record[name][i] for i in keep]
+        for name in ('u', 'v'):
+            record[name] = [None if record[name][i] is None else round(record[name][i], 5)
+                            for i in keep]
         record['keep'] = 'full 21 x 21' if full else '11 x 11 sub-grid (every second)'
+        # The directions as their grid: tx = linspace(-half_tx, half_tx, n)[::step].
+        record['grid'] = {'half_tx': float(np.max(np.abs(record.pop('tx')))),
+                          'half_ty': float(np.max(np.abs(record.pop('ty')))), 'n': GRID,
+                          'step': 1 if full else 2}
         out[key] = record
-        print(f'[{time.monotonic() - start:6.1f} s] {key}: {sum(u is not None for u in record["u"])}'
+        rays = sum(u is not None for u in record['u'])
+        print(f'[{time.monotonic() - start:6.1f} s] {key}: {rays}'
               f' rays, stop residual {record["max_stop_residual_mm"]}', file=sys.stderr,
               flush=True)
     doc = {'provenance': {'generator': 'tools/make_optiland_ports.py',
@@ -388,7 +394,9 @@ def main(argv: list[str] | None = None) -> int:
                           'runtime_s': round(time.monotonic() - start, 1)},
            'conventions': {'grid': f'{GRID} x {GRID} directions tx = X/Z, ty = Y/Z spanning '
                                    f'{COVERAGE} of the raw image (pinhole K of our model), '
-                                   'row-major (ty outer)',
+                                   'row-major (ty outer); stored as grid: half_tx, half_ty, '
+                                   'n and step (1: the full grid, 2: every second row and '
+                                   'column); tx = linspace(-half_tx, half_tx, n)[::step]',
                            'u_v': "optiland's chief ray on our sensor plane as a raw pixel "
                                   '(K principal point, inverted image turned upright); null '
                                   'where optiland fails or misses the stop by > 1e-8 mm'},

@@ -122,8 +122,8 @@ def port_from_values(values: Mapping[str, Any], lens: Prescription,
     if kind == 'flat':
         distance = float(values['port.distance_mm'])
         if not distance > 0.0:
-            raise ModelError('port.distance_mm', f'{distance:g} mm puts the port\'s inner face '
-                                                 'on or behind the lens\'s first vertex: it '
+            raise ModelError('port.distance_mm', f'{distance:g} mm puts the port inner face '
+                                                 'on or behind the lens first vertex: it '
                                                  'must be > 0')
         port = Port('flat', thickness, index, distance_mm=distance,
                     tilt_x_rad=math.radians(float(values['port.tilt_x_deg'])),
@@ -162,7 +162,7 @@ def _check_flat_clearance(port: Port, lens: Prescription) -> None:
         clearance = np.min(-r * tilt + (z + port.distance_mm) * n[2])
         if clearance <= 0.0:
             raise ModelError('port.distance_mm',
-                             f'{port.distance_mm:g} mm: the port\'s inner face cuts lens surface '
+                             f'{port.distance_mm:g} mm: the port inner face cuts lens surface '
                              f'{i} within its clear aperture (by {-clearance:.3g} mm)')
 
 
@@ -176,7 +176,7 @@ def _check_dome_clearance(port: Port, lens: Prescription, values: Mapping[str, A
             if np.max(reach) >= port.radius_mm:
                 raise ModelError(
                     'port.radius_mm',
-                    f'{port.radius_mm:g} mm: the dome\'s inner sphere (centre '
+                    f'{port.radius_mm:g} mm: the dome inner sphere (centre '
                     f'{float(values["port.center_offset_mm"]):g} mm in front of the entrance '
                     f'pupil) meets lens surface {i} within its clear aperture: the lens must '
                     f'fit inside the dome (it reaches {np.max(reach):.4g} mm from the centre)')
@@ -250,7 +250,7 @@ class PortedSource(LensSource):
         if not z_scene < 0.0:
             raise ModelError('scene.distance_mm',
                              f'{distance_mm:g} mm from the front principal plane puts the scene '
-                             f'{z_scene:.4g} mm behind the port\'s outer face: it must lie in '
+                             f'{z_scene:.4g} mm behind the port outer face: it must lie in '
                              'front of the port, in the water')
         return self._combined_h - z_scene
 
@@ -375,7 +375,7 @@ class PortedSource(LensSource):
     # --- the rest of the seam ---
     @property
     def prescription(self) -> Prescription:
-        """Return the port and the lens as one prescription (the scene in the medium)."""
+        """Return the port and the lens as one prescription, the scene in the medium."""
         return self.combined
 
     @property

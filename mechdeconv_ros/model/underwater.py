@@ -9,9 +9,9 @@ port (flat untilted, dome centred on the axis; K, D and the remap from it as for
 
 Projection (:func:`project_points`, ``mechdeconv project``): scene directions (tx, ty) =
 (X/Z, Y/Z) at Z = ``scene.distance_mm`` to raw pixels. A symmetric port: as any lens
-(:func:`mechdeconv_ros.model.assembly.project`, the traced chief-ray lines). A tilted flat port or a decentred dome: each point's
-chief ray traced exactly in 3-D (:meth:`PortedSource.sensor_points`), pixel =
-c + (a / p_x, b / p_y).
+(:func:`mechdeconv_ros.model.assembly.project`, the traced chief-ray lines). A tilted flat
+port or a decentred dome: each point's chief ray traced exactly in 3-D
+(:meth:`PortedSource.sensor_points`), pixel = c + (a / p_x, b / p_y).
 
 Remap (:func:`residual_maps`): exact per-pixel Newton over 1080p is too slow, so a non-symmetric
 port's maps are the symmetric port's (radial, exact to the curve's interpolation) plus a

@@ -250,7 +250,7 @@ PLASTIC_RANGE_NM = (436.8, 1052.0)
 
 def plastic(name: str) -> Glass:
     """
-    Return a port plastic (``PMMA``, ``POLYCARBONATE`` or an alias), catalog ``PLASTIC``.
+    Return a port plastic by name: ``PMMA``, ``POLYCARBONATE`` or an alias (``PLASTIC``).
 
     :param name: the plastic's name, upper case.
     :return: a ``sellmeier2`` Glass.

@@ -41,7 +41,7 @@ from dataclasses import dataclass, replace
 import math
 
 from mechdeconv_ros.optics.prescription import (
-    paraxial_matrix, Prescription, Surface, surfaces_before, vertex_z)
+    paraxial_matrix, Prescription, Surface, surfaces_before)
 from mechdeconv_ros.optics.surfaces import refract
 from mechdeconv_ros.optics.trace3d import lens_system, System, trace_pass
 import numpy as np

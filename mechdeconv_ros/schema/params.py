@@ -142,13 +142,13 @@ UNDERWATER_SPECS: tuple[ParamSpec, ...] = (
               '400-700 nm, 0-30 degC, 0-35 PSU, refused outside. scene.distance_mm stays '
               'measured from the front principal plane of the lens alone.', choices=MEDIA),
     _d('scene.salinity_psu', 35.0, 'PSU',
-       'Salinity of seawater (scene.medium seawater); 0-35 PSU (the formula\'s range).',
+       'Salinity of seawater (scene.medium seawater); 0-35 PSU (the range of the formula).',
        0.0, 1.0e3),
     _d('scene.temperature_c', 20.0, 'degC',
-       'Temperature of the water; 0-30 degC (the formula\'s range).', -1.0e3, 1.0e3),
+       'Temperature of the water; 0-30 degC (the range of the formula).', -1.0e3, 1.0e3),
     _d('scene.medium_index', 0.0, '1',
-       'Index of the scene\'s medium relative to air at every wavelength (overrides '
-       'scene.medium\'s formula: no dispersion); 0 = from scene.medium. Below 1 is refused.',
+       'Index of the medium of the scene relative to air at every wavelength (overrides '
+       'the formula of scene.medium: no dispersion); 0 = from scene.medium. Below 1 is refused.',
        0.0, 4.0),
     ParamSpec('port.type', 'string', 'none', '',
               'Window in front of the lens: none, flat (a plane-parallel plate) or dome (a '
@@ -158,14 +158,14 @@ UNDERWATER_SPECS: tuple[ParamSpec, ...] = (
     _d('port.thickness_mm', 5.0, 'mm', 'Thickness of the port (flat or dome); > 0.',
        0.0, 1.0e3),
     ParamSpec('port.glass', 'string', '', '',
-              "Material of the port by name: a catalog glass (N-BK7), PMMA (acrylic) or "
+              'Material of the port by name: a catalog glass (N-BK7), PMMA (acrylic) or '
               "POLYCARBONATE (Sultanova et al. 2009), its index at each wavelength; '' = "
               'port.refractive_index.'),
     _d('port.refractive_index', 1.4906, '1',
        'Index of the port when port.glass is empty (PMMA at the d line).', 1.0, 4.0),
     _d('port.distance_mm', 10.0, 'mm',
-       'Flat port: from the first lens vertex along the axis toward the scene to the port\'s '
-       'inner face; > 0.', 0.0, 1.0e4),
+       'Flat port: from the first lens vertex along the axis toward the scene to the inner face '
+       'of the port; > 0.', 0.0, 1.0e4),
     _d('port.tilt_x_deg', 0.0, 'deg',
        'Flat port: its plane turned about the row (x) line through the point where the axis '
        'meets its inner face; > 0 brings the part seen at larger v (image rows further down) '
@@ -176,7 +176,7 @@ UNDERWATER_SPECS: tuple[ParamSpec, ...] = (
     _d('port.radius_mm', 50.0, 'mm', 'Dome port: radius of its inner surface; > 0.',
        0.0, 1.0e4),
     _d('port.center_offset_mm', 0.0, 'mm',
-       'Dome port: its centre along the axis from the lens\'s paraxial entrance pupil (in '
+       'Dome port: its centre along the axis from the paraxial entrance pupil of the lens (in '
        'air), > 0 toward the scene; 0 = centred on the pupil (nearly central).',
        -1.0e4, 1.0e4),
     _d('port.decenter_x_mm', 0.0, 'mm',
