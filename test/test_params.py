@@ -57,6 +57,12 @@ def test_issue_contract_names_are_declared():
                                          'tilt_y_deg')]
     contract += [f'sensor.tolerance.{k}' for k in ('axis_offset_x_mm', 'axis_offset_y_mm',
                                                    'tilt_x_deg', 'tilt_y_deg')]
+    # Issue 27: underwater (the scene's medium and the port).
+    contract += ['scene.medium', 'scene.salinity_psu', 'scene.temperature_c',
+                 'scene.medium_index', 'port.type', 'port.thickness_mm', 'port.glass',
+                 'port.refractive_index', 'port.distance_mm', 'port.tilt_x_deg',
+                 'port.tilt_y_deg', 'port.radius_mm', 'port.center_offset_mm',
+                 'port.decenter_x_mm', 'port.decenter_y_mm']
     assert set(contract) <= set(params.SPECS)
     assert set(contract) == set(params.MODEL_PARAMS)
 
