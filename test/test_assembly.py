@@ -8,7 +8,7 @@ import math
 
 from mechdeconv_ros.model.assembly import (
     plane_offsets, project, SensorPose, unproject, unproject_angles)
-from mechdeconv_ros.model.model import build_model
+from mechdeconv_ros.model.model import build_model, ModelError
 from mechdeconv_ros.tools.cli import main
 import numpy as np
 from numpy.testing import assert_allclose
@@ -127,3 +127,177 @@ def test_cli_project_names_the_bad_line(tmp_path, capsys):
     status = main(['project', '--width', '64', '--height', '48', str(path)])
     _, err = capsys.readouterr()
     assert status == 2 and 'in.csv:2' in err
+
+
+@pytest.mark.parametrize('extra, parameter, words', [
+    ({'sensor.axis_offset_x_mm': 1.4}, 'sensor.axis_offset_x_mm', 'off the sensor'),
+    ({'sensor.axis_offset_y_mm': -1.1}, 'sensor.axis_offset_y_mm', 'off the sensor'),
+    # A sensor 0.05 mm behind the vertex of the convex rear surface (r2 = -4 mm): tilted
+    # 10 deg, its pixels 0.4 to 1 mm from the axis would cut the glass.
+    ({'lens.image_distance_mm': 0.05, 'sensor.tilt_y_deg': 10.0}, 'sensor.tilt_y_deg',
+     'hit the lens'),
+    ({'lens.image_distance_mm': 0.05, 'sensor.tilt_x_deg': -9.0, 'sensor.tilt_y_deg': 3.0},
+     'sensor.tilt_x_deg', 'hit the lens'),
+])
+def test_refusals_name_the_parameter(extra, parameter, words):
+    with pytest.raises(ModelError) as err:
+        build_model({**SIZE, **extra})
+    assert err.value.parameter == parameter and words in str(err.value)
+
+
+def test_refusal_on_the_cli(capsys):
+    status = main(['project', '--width', '640', '--height', '480', '-p',
+                   'sensor.axis_offset_x_mm=2', '-'])
+    _, err = capsys.readouterr()
+    assert status == 2 and 'sensor.axis_offset_x_mm' in err
+
+
+def _consumer_error(model, every_px=(41, 31)):
+    """Largest distance between a raw pixel and where cv2 projects its traced direction."""
+    import cv2
+    us = np.linspace(0, model.width - 1, every_px[0])
+    vs = np.linspace(0, model.height - 1, every_px[1])
+    uu, vv = (a.ravel() for a in np.meshgrid(us, vs))
+    theta, phi = unproject_angles(model, uu, vv)
+    keep = np.isfinite(theta) & (theta < math.radians(89.0))
+    t = np.tan(theta[keep])
+    points = np.stack([t * np.cos(phi[keep]), t * np.sin(phi[keep]), np.ones(t.size)], axis=1)
+    projected, _ = cv2.projectPoints(points, np.zeros(3), np.zeros(3), model.K,
+                                     np.array(model.D))
+    projected = projected.reshape(-1, 2)
+    return float(np.max(np.hypot(projected[:, 0] - uu[keep], projected[:, 1] - vv[keep])))
+
+
+def test_camera_info_of_an_offset_sensor_is_exact_for_consumers():
+    model = build_model({**SIZE, 'sensor.axis_offset_x_mm': 0.04,
+                         'sensor.axis_offset_y_mm': -0.025})
+    assert model.distortion_model == 'plumb_bob'
+    assert _consumer_error(model) <= 0.05
+    assert model.equivalent_max_error_px <= 0.05
+
+
+def test_camera_info_of_a_tilted_sensor_fits_tangential_terms():
+    model = build_model({**SIZE, 'sensor.tilt_x_deg': 0.3, 'sensor.tilt_y_deg': -0.2})
+    assert model.distortion_model in ('plumb_bob', 'rational_polynomial')
+    assert model.D[2] != 0.0 and model.D[3] != 0.0          # p1, p2
+    # The published error is what a consumer (cv2's own projection) sees.
+    assert _consumer_error(model) == pytest.approx(model.equivalent_max_error_px, rel=0.2,
+                                                   abs=0.005)
+    if model.equivalent_max_error_px > 0.05:
+        assert any('no ROS distortion model' in w for w in model.warnings)
+
+
+# --- .zmx: a coordinate break before the image surface places the sensor --------------------
+
+def _singlet_with_break(params: str, disz: str = '0') -> str:
+    from test_zmx import SINGLET
+    block = ('SURF 3\n  TYPE COORDBRK\n  CURV 0.0\n' + params + f'  DISZ {disz}\nSURF 4\n')
+    return SINGLET.replace('  DISZ 47.5', '  DISZ 46.5').replace('SURF 3\n', block)
+
+
+def _import(text: str):
+    from mechdeconv_ros.lenses.lens_import import zmx_values
+    from mechdeconv_ros.lenses.zmx import parse
+    from test_zmx import fixed_index
+    return zmx_values(parse(text, 'cb.zmx'), resolve=fixed_index)
+
+
+def _rx(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def _ry(b):
+    c, s = math.cos(b), math.sin(b)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def test_zmx_break_before_the_image_decenters_the_sensor():
+    values = _import(_singlet_with_break('  PARM 1 0.1\n  PARM 2 -0.05\n')).values
+    assert values['sensor.axis_offset_x_mm'] == pytest.approx(0.1)
+    # The file's +y is up in the image; v grows downwards.
+    assert values['sensor.axis_offset_y_mm'] == pytest.approx(0.05)
+    assert values['sensor.tilt_x_deg'] == 0.0 and values['sensor.tilt_y_deg'] == 0.0
+    assert values['lens.image_distance_mm'] == pytest.approx(46.5)
+    dummy = _import(_singlet_with_break('  PARM 1 0\n', disz='1')).values
+    assert 'sensor.axis_offset_x_mm' not in dummy
+    assert dummy['lens.image_distance_mm'] == pytest.approx(47.5)
+
+
+@pytest.mark.parametrize('order', [0, 1])
+def test_zmx_break_geometry_is_the_sensor_plane(order):
+    dx, dy, a, b, t = 0.3, -0.2, 2.0, -1.5, 0.4
+    text = _singlet_with_break(f'  PARM 1 {dx}\n  PARM 2 {dy}\n  PARM 3 {a}\n  PARM 4 {b}\n'
+                               f'  PARM 6 {order}\n', disz=str(t))
+    values = _import(text).values
+    # The break, as Zemax places it: frame F = R_x(a) R_y(b), origin decentred (before or
+    # after the tilt), the image surface t along the new z.
+    frame = _rx(math.radians(a)) @ _ry(math.radians(b))
+    origin = (np.array([dx, dy, 46.5]) if order == 0
+              else frame @ np.array([dx, dy, 0.0]) + np.array([0.0, 0.0, 46.5]))
+    vertex = origin + t * frame[:, 2]
+    # Our sensor: the axis point at image_distance, R = R_x(tilt_x) R_y(tilt_y) in the read-out
+    # frame (a, b, z) = (-x, y, z); the centre at (a, b) = -offset.
+    pose = SensorPose.from_values(values)
+    r = pose.rotation()
+    centre = np.array([0.0, 0.0, values['lens.image_distance_mm']]) + r @ np.array(
+        [-pose.offset_x_mm, -pose.offset_y_mm, 0.0])
+    centre_lens = np.array([-centre[0], centre[1], centre[2]])
+    np.testing.assert_allclose(centre_lens, vertex, atol=1e-12)
+    # Same plane: the normals agree (read-out normal turned to the lens frame).
+    normal = r[:, 2] * np.array([-1.0, 1.0, 1.0])
+    np.testing.assert_allclose(np.abs(normal @ frame[:, 2]), 1.0, atol=1e-12)
+    # And the rows: the read-out a axis is the lens frame's -x turned.
+    np.testing.assert_allclose(r[:, 0] * np.array([-1.0, 1.0, 1.0]), -frame[:, 0],
+                               atol=1e-12)
+
+
+@pytest.mark.parametrize('params, words', [
+    ('  PARM 3 45\n', ['line 39', 'PARM 3', '45 deg']),
+    ('  PARM 1 nan\n', ['line 39', 'PARM']),
+    ('  PARM 5 3\n', ['line 39', 'about the axis']),
+    ('  PARM 1 1e6\n', ['line 39', 'off the axis']),
+])
+def test_zmx_hostile_breaks_are_refused_naming_the_line(params, words):
+    from mechdeconv_ros.lenses.zmx import LensImportError
+    with pytest.raises(LensImportError) as err:
+        _import(_singlet_with_break(params))
+    for word in words:
+        assert word in str(err.value), (word, str(err.value))
+
+
+def test_zmx_element_decenter_stays_refused():
+    from mechdeconv_ros.lenses.zmx import LensImportError
+    from test_zmx import SINGLET
+    text = SINGLET.replace('SURF 2\n', 'SURF 2\n  TYPE COORDBRK\n  PARM 1 0.2\n  DISZ 0\n'
+                                       'SURF 3\n').replace('SURF 3\n  TYPE STANDARD\n  CURV 0.0'
+                                                           '\n  DISZ 0', 'SURF 4\n  TYPE '
+                                                           'STANDARD\n  CURV 0.0\n  DISZ 0')
+    with pytest.raises(LensImportError, match='inside the lens'):
+        _import(text)
+
+
+def test_datasheet_and_colour_channels_take_the_pose():
+    from mechdeconv_ros.imaging.remap import Rectifier
+    from mechdeconv_ros.schema.params import load_params_file
+    # A datasheet table: its chief rays run through the rear principal point (s = h / v).
+    table = {**SIZE, 'lens.focal_length_mm': 4.0,
+             'lens.datasheet.field_angle_deg': [0.0, 10.0, 20.0, 30.0, 40.0],
+             'lens.datasheet.image_height_mm': [0.0, 0.7045, 1.4499, 2.2893, 3.2826],
+             'scene.distance_mm': 0.0, 'sensor.tilt_x_deg': 1.0,
+             'sensor.axis_offset_x_mm': 0.03}
+    model = build_model(table)
+    assert model.K[0, 2] == pytest.approx(319.5 + 0.03 / model.pixel_mm[0])
+    theta, phi = unproject_angles(model, np.array([10.0, 600.0]), np.array([20.0, 400.0]))
+    u, v = project(model, np.tan(theta) * np.cos(phi), np.tan(theta) * np.sin(phi))
+    assert_allclose(u, [10.0, 600.0], atol=1e-6)
+    assert_allclose(v, [20.0, 400.0], atol=1e-6)
+    # Lateral colour: each channel's maps meet the same tilted plane.
+    values = load_params_file('config/cooke_triplet.yaml')
+    values.update({'sensor.width_px': 480, 'sensor.height_px': 270,
+                   'sensor.pixel_size_x_um': 32.0, 'sensor.pixel_size_y_um': 32.0,
+                   'sensor.tilt_y_deg': 1.0, 'output.lateral_color_correction': True})
+    colour = Rectifier(build_model(values))
+    assert colour.colour is not None
+    frame = np.full((270, 480, 3), 128, np.uint8)
+    assert colour.correct(frame, colours=(0, 1, 2)).shape == frame.shape

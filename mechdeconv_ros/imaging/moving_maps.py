@@ -47,6 +47,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import cv2
 from mechdeconv_ros.lenses.lens_table import LensState, Mechanism, values_at
+from mechdeconv_ros.model.assembly import raw_from_normalised
 import numpy as np
 import numpy.typing as npt
 
@@ -108,15 +109,12 @@ def node_map(model: Any, step: int = NODE_STEP) -> npt.NDArray[np.float32]:
     u, v = np.meshgrid(xs, ys)
     xn = (u - model.K_new[0, 2]) / model.K_new[0, 0]
     yn = (v - model.K_new[1, 2]) / model.K_new[1, 1]
-    ideal = np.hypot(xn, yn) * model.image_distance_mm
-    curve = model.curve
-    # np.interp holds the last sample beyond the field: the node keeps the edge's scale.
-    real = np.interp(np.minimum(ideal, curve.valid_ideal_mm), curve.ideal_mm, curve.real_mm)
-    with np.errstate(invalid='ignore', divide='ignore'):
-        scale = np.where(ideal > 0.0, real / np.maximum(ideal, 1e-300), 1.0)
+    # The maps' equation (an off-centre, tilted sensor too); beyond the field the node keeps
+    # the edge's scale (hold).
+    map_u, map_v = raw_from_normalised(model, xn, yn, hold=True)
     out = np.empty(u.shape + (2,), np.float32)
-    out[..., 0] = model.K[0, 2] + model.K[0, 0] * xn * scale
-    out[..., 1] = model.K[1, 2] + model.K[1, 1] * yn * scale
+    out[..., 0] = map_u
+    out[..., 1] = map_v
     return out
 
 

@@ -287,6 +287,7 @@ def zmx_values(lens: ZmxLens, wavelength_nm: float | None = None,
     if optional['lens.image_distance_mm'] == 0.0:
         out.warnings.append('the image surface is on the last lens vertex: '
                             'lens.image_distance_mm 0 puts the sensor at the paraxial image')
+    optional.update(lens.sensor_pose)      # a coordinate break before the image (zmx)
     for name, value in optional.items():
         if name in SPECS:
             values[name] = value

@@ -44,6 +44,14 @@ from pathlib import Path
 #: Surface types this package traces.
 SUPPORTED_TYPES = ('STANDARD', 'EVENASPH')
 
+#: The coordinate break: imported just before the image surface (the sensor's pose), dropped
+#: when it moves nothing, refused anywhere else (:func:`fold_breaks`).
+BREAK_TYPE = 'COORDBRK'
+#: Largest sensor tilt a coordinate break may give (deg; ``sensor.tilt_*_deg``'s range).
+MAX_BREAK_TILT_DEG = 10.0
+#: Largest sensor decenter it may give (mm; ``sensor.axis_offset_*_mm``'s range).
+MAX_BREAK_DECENTER_MM = 100.0
+
 #: Surface types refused with a reason (what the model cannot trace), by type-name prefix.
 _REFUSED_TYPES = (
     ('COORDBRK', 'a coordinate break (the lens is not centred on one axis)'),
@@ -118,6 +126,9 @@ class ZmxSurface:
     aperture: float = 0.0
     stop: bool = False
     comment: str = ''
+    type_line: int = 0
+    #: A coordinate break's PARM j: (value as written, its line).
+    break_params: dict[int, tuple[float, int]] = field(default_factory=dict)
 
 
 @dataclass
@@ -139,6 +150,8 @@ class ZmxLens:
     notes: list[str] = field(default_factory=list)
     #: ``''`` (air), ``'water'`` or ``'seawater'``: the object space's medium.
     object_medium: str = ''
+    #: The sensor's pose from a coordinate break before the image surface (parameter values).
+    sensor_pose: dict[str, float] = field(default_factory=dict)
 
     @property
     def primary_wavelength_um(self) -> float:
@@ -235,8 +248,8 @@ def _field(tokens: list[str], index: int) -> str | None:
 
 def _refuse_type(path: str, line: int, number: int, type_name: str) -> None:
     upper = type_name.upper()
-    if upper in SUPPORTED_TYPES:
-        return
+    if upper in SUPPORTED_TYPES or upper == BREAK_TYPE:
+        return      # a coordinate break is judged once the file is read (fold_breaks)
     for prefix, why in _REFUSED_TYPES:
         if upper.startswith(prefix):
             raise LensImportError(f'{path}: line {line}: surface {number} is {why} (TYPE '
@@ -255,7 +268,11 @@ def _read_surface_line(lens: ZmxLens, surface: ZmxSurface, keyword: str, tokens:
     value = _field(tokens, 1)
     if keyword == 'TYPE':
         surface.type = value or 'STANDARD'
+        surface.type_line = line
         _refuse_type(path, line, number, surface.type)
+    elif keyword == 'PARM' and len(tokens) >= 3 and surface.type.upper() == BREAK_TYPE:
+        surface.break_params[int(_finite(path, line, keyword, tokens[1]))] = (
+            _finite(path, line, keyword, tokens[2]), line)
     elif keyword == 'CURV' and value is not None:
         surface.curvature = _finite(path, line, keyword, value) / unit
     elif keyword == 'DISZ' and value is not None:
@@ -369,6 +386,36 @@ def parse(text: str, path: str = '<zmx>') -> ZmxLens:
         package cannot import (see the module docstring).
     """
     lens = ZmxLens(path=path)
+    try:
+        return _parse(lens, text)
+    except LensImportError as err:
+        # A coordinate break inside the lens comes first in the file: name it, not a
+        # refusal of a surface behind it (a mirror of a folded system, say).
+        _refuse_inner_break(lens, sum(1 for raw in text.splitlines()
+                                      if raw.split()[:1] == ['SURF']))
+        raise err
+
+
+def _refuse_inner_break(lens: ZmxLens, count: int) -> None:
+    """Refuse the first moving coordinate break read that is not just before the image."""
+    for surface in lens.surfaces:
+        moving = any(surface.break_params.get(j, (0.0, 0))[0] for j in range(1, 6))
+        if surface.type.upper() == BREAK_TYPE and moving and 0 < surface.number < count - 2:
+            raise _inner_break(lens, surface) from None
+
+
+def _inner_break(lens: ZmxLens, surface: ZmxSurface) -> LensImportError:
+    """Return the refusal of a coordinate break inside the lens (an element's decenter)."""
+    return LensImportError(f'{lens.path}: line {surface.type_line}: surface {surface.number} '
+                           f'is a coordinate break ({BREAK_TYPE}) inside the lens: it '
+                           'decenters or tilts the elements after it, and this model traces '
+                           'centred lenses only (a break just before the image surface is '
+                           'imported: it places the sensor)')
+
+
+def _parse(lens: ZmxLens, text: str) -> ZmxLens:
+    """Read the lines of :func:`parse` into ``lens``."""
+    path = lens.path
     current: ZmxSurface | None = None
     seen_keyword = False
     for line, raw in enumerate(text.splitlines(), start=1):
@@ -391,6 +438,8 @@ def parse(text: str, path: str = '<zmx>') -> ZmxLens:
         else:
             current = None
             _read_header_line(lens, keyword, tokens, line)
+    if len(lens.surfaces) >= 3:
+        fold_breaks(lens)
     _check_whole(lens, seen_keyword)
     return lens
 
@@ -451,6 +500,109 @@ def _check_whole(lens: ZmxLens, seen_keyword: bool) -> None:
                           'the surface data (the configuration current when the file was saved)')
     if not stops:
         lens.notes.append('no STOP surface: surface 1 taken as the stop')
+
+
+def fold_breaks(lens: ZmxLens) -> None:
+    """
+    Import the coordinate breaks the model can trace; refuse the others naming the line.
+
+    A break that moves nothing (a dummy) is dropped, its thickness added to the surface before
+    it. A break just before the image surface, behind a surface into air, places the sensor
+    (docs/design.md section 2.16): Zemax's ``PARM 1, 2`` decenter x, y (lens units), ``PARM 3,
+    4`` tilt about x, then about the new y (deg, right-handed), ``PARM 6`` the order (0:
+    decenter then tilt, 1: tilt then decenter); its frame ``F = R_x(a) R_y(b)``. The sensor
+    plane is the image surface's (the break's origin moved by its own thickness along the new
+    z); the lens axis meets it at ``z_A`` (the new distance from the last lens surface, so
+    ``lens.image_distance_mm``), the sensor centre lies at ``(V - A) . F e_x`` along x and
+    ``(V - A) . F e_y`` along y from it, and with the file's +y up in the image (the raw image
+    is the inverted image read upright) ``sensor.axis_offset_x_mm = (V - A) . F e_x``,
+    ``axis_offset_y_mm = -(V - A) . F e_y``, ``tilt_x_deg = -a``, ``tilt_y_deg = -b``. A break
+    elsewhere (an element's decenter or tilt), in glass, with a rotation about the axis
+    (``PARM 5``) or a tilt or decenter beyond the parameters' ranges is refused.
+
+    :param lens: the lens as read; changed in place.
+    :raises LensImportError: naming the file, line and surface.
+    """
+    i = len(lens.surfaces) - 1
+    while i >= 0:
+        surface = lens.surfaces[i]
+        if surface.type.upper() == BREAK_TYPE:
+            _fold_break(lens, i)
+        i -= 1
+
+
+def _fold_break(lens: ZmxLens, i: int) -> None:
+    """Drop, import or refuse the coordinate break ``lens.surfaces[i]``."""
+    surface = lens.surfaces[i]
+    where = f'{lens.path}: line {surface.type_line}: surface {surface.number}'
+    value = {j: surface.break_params.get(j, (0.0, surface.type_line))[0] for j in range(1, 7)}
+    line = {j: surface.break_params.get(j, (0.0, surface.type_line))[1] for j in range(1, 7)}
+    if i in (0, len(lens.surfaces) - 1):
+        raise LensImportError(f'{where}: the object or image surface is a coordinate break '
+                              f'({BREAK_TYPE}): a lens file starts at the scene and ends at '
+                              'the sensor')
+    before = lens.surfaces[i - 1]
+    if not any(value[j] for j in range(1, 6)):
+        before.thickness = (before.thickness or 0.0) + (surface.thickness or 0.0)
+        del lens.surfaces[i]
+        return
+    if i != len(lens.surfaces) - 2:
+        raise _inner_break(lens, surface)
+    if before.glass and before.glass.upper() != 'AIR':
+        raise LensImportError(f'{where} is a coordinate break ({BREAK_TYPE}) in glass '
+                              f'{before.glass}: the sensor of this model sits in air')
+    if value[5]:
+        raise LensImportError(f'{lens.path}: line {line[5]}: surface {surface.number}: the '
+                              f'coordinate break turns the sensor {value[5]:g} deg about the '
+                              'axis (PARM 5): not a parameter of this model')
+    for j in (3, 4):
+        if abs(value[j]) > MAX_BREAK_TILT_DEG:
+            raise LensImportError(f'{lens.path}: line {line[j]}: surface {surface.number}: '
+                                  f'the coordinate break tilts the sensor {value[j]:g} deg '
+                                  f'(PARM {j}): more than the {MAX_BREAK_TILT_DEG:g} deg of '
+                                  'an assembly error (sensor.tilt_*_deg)')
+    _place_sensor(lens, i, value, line)
+
+
+def _place_sensor(lens: ZmxLens, i: int, value: dict[int, float],
+                  line: dict[int, int]) -> None:
+    """Turn the break before the image into the sensor's pose (see :func:`fold_breaks`)."""
+    surface, before = lens.surfaces[i], lens.surfaces[i - 1]
+    a, b = math.radians(value[3]), math.radians(value[4])
+    ca, sa, cb, sb = math.cos(a), math.sin(a), math.cos(b), math.sin(b)
+    # F = R_x(a) R_y(b): its columns are the new x, y, z axes in the lens frame.
+    ex = (cb, sa * sb, -ca * sb)
+    ey = (0.0, ca, sa)
+    ez = (sb, -sa * cb, ca * cb)
+    dx, dy = value[1] * lens.unit_mm, value[2] * lens.unit_mm
+    z_break = before.thickness or 0.0
+    if value[6]:
+        origin = [dx * ex[k] + dy * ey[k] for k in range(3)]
+        origin[2] += z_break
+    else:
+        origin = [dx, dy, z_break]
+    t = surface.thickness or 0.0
+    vertex = [origin[k] + t * ez[k] for k in range(3)]
+    # Where the axis meets the plane: n . (A - V) = 0 with A = (0, 0, z_A).
+    z_axis = vertex[2] + (ez[0] * vertex[0] + ez[1] * vertex[1]) / ez[2]
+    rel = (vertex[0], vertex[1], vertex[2] - z_axis)
+    offsets = (sum(rel[k] * ex[k] for k in range(3)), -sum(rel[k] * ey[k] for k in range(3)))
+    for j, offset, name in ((1, offsets[0], 'x'), (2, offsets[1], 'y')):
+        if abs(offset) > MAX_BREAK_DECENTER_MM:
+            raise LensImportError(f'{lens.path}: line {line[j]}: surface {surface.number}: '
+                                  f'the coordinate break puts the sensor centre {offset:g} mm '
+                                  f'off the axis along {name}: beyond sensor.axis_offset_'
+                                  f'{name}_mm')
+    before.thickness = z_axis
+    lens.sensor_pose = {'sensor.axis_offset_x_mm': offsets[0],
+                        'sensor.axis_offset_y_mm': offsets[1],
+                        'sensor.tilt_x_deg': -value[3], 'sensor.tilt_y_deg': -value[4]}
+    lens.notes.append(
+        f'surface {surface.number} (line {surface.type_line}): the coordinate break before the '
+        f'image surface places the sensor: axis offset {offsets[0]:.6g}, {offsets[1]:.6g} mm, '
+        f'tilt {-value[3]:g}, {-value[4]:g} deg (sensor.axis_offset_*, sensor.tilt_*); the '
+        f'axis meets it {z_axis:.6g} mm behind the last lens surface')
+    del lens.surfaces[i]
 
 
 def read(path: str | Path) -> ZmxLens:

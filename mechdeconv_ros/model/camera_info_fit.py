@@ -93,7 +93,7 @@ def boundary_points(w: int, h: int, per_side: int = 64) -> FloatArray:
 
 
 @functools.lru_cache(maxsize=8)
-def _raw_probe_points(width: int, height: int) -> FloatArray:
+def raw_probe_points(width: int, height: int) -> FloatArray:
     """Return the raw pixels the consumer error is measured on: edges, corners and a grid."""
     xs = np.linspace(-0.5, width - 0.5, 41)
     ys = np.linspace(-0.5, height - 0.5, 31)
@@ -123,7 +123,7 @@ def fit_equivalent(field: RadialMap, v: float, K: FloatArray, width: int, height
     :return: one :class:`EquivalentFit` per model fitted, in :data:`EQUIVALENT_MODELS` order.
     """
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
-    points = _raw_probe_points(width, height)
+    points = raw_probe_points(width, height)
     xn, yn = (points[:, 0] - cx) / fx, (points[:, 1] - cy) / fy
     rn = np.hypot(xn, yn)
     theta_p = field.angle_from_real(rn * v)

@@ -60,9 +60,11 @@ from mechdeconv_ros.lenses.moving_source import source_for
 from mechdeconv_ros.lenses.port_source import has_port, PortedSource
 from mechdeconv_ros.model import lateral_color, underwater
 from mechdeconv_ros.model.assembly import (
-    axis_pixel, raw_from_normalised, SensorPose, unproject_angles)
+    axis_pixel, check_pose, raw_from_normalised, SensorPose, unproject_angles)
 from mechdeconv_ros.model.camera_info_fit import (
-    boundary_points, choose_equivalent, EQUIVALENT_MAX_ERROR_PX, EquivalentFit, fit_equivalent)
+    boundary_points, choose_equivalent, EQUIVALENT_MAX_ERROR_PX, EquivalentFit, fit_equivalent,
+    raw_probe_points)
+from mechdeconv_ros.model.camera_info_tilt import fit_tilted
 from mechdeconv_ros.model.lateral_color import LateralColor
 from mechdeconv_ros.model.radial_map import (
     COARSE_SAMPLES, CURVE_SAMPLES, field_cap_rad, projected, RadialMap, resample, trace_curve)
@@ -423,6 +425,7 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
     # directions of their pixels: the sensor's offset and tilt included).
     camera = SimpleNamespace(values=vals, K=K, pixel_mm=(px, py), field_curve=coarse,
                              source=source)
+    check_pose(vals, source, camera, w, h, sensor_z)
     boundary = boundary_points(w, h)
     b_theta, b_phi = unproject_angles(camera, boundary[:, 0], boundary[:, 1])
     b_theta = np.where(np.isfinite(b_theta), b_theta, coarse.max_field_angle_rad)
@@ -454,8 +457,20 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
     reach = min(1.02 * max(out_corner, raw_corner_ideal), disk * v * 1.001)
     curve = resample(coarse, v, reach, CURVE_SAMPLES, projection)
 
-    fits = fit_equivalent(coarse, v, K, w, h)
+    if SensorPose.from_values(vals).tilted:
+        # No rotational symmetry: the consumer models in two dimensions, with their tangential
+        # terms, on the traced directions of the probe pixels (model/camera_info_tilt.py).
+        probe = raw_probe_points(w, h)
+        p_theta, p_phi = unproject_angles(camera, probe[:, 0], probe[:, 1])
+        fits = fit_tilted(p_theta, p_phi, probe[:, 0], probe[:, 1], K)
+    else:
+        fits = fit_equivalent(coarse, v, K, w, h)
     chosen = choose_equivalent(fits)
+    if SensorPose.from_values(vals).tilted and chosen.max_error_px > EQUIVALENT_MAX_ERROR_PX:
+        warnings.append(f'sensor.tilt_x_deg/tilt_y_deg: no ROS distortion model represents '
+                        f'this tilt within {EQUIVALENT_MAX_ERROR_PX:g} px: camera_info carries '
+                        f'the best fit, {chosen.distortion_model}, off by up to '
+                        f'{chosen.max_error_px:.3g} px (image_rect is exact)')
     # How far the lens moves the outline from where the pinhole K puts its directions.
     disp = (boundary_ideal * np.array([fx, fy]) + K[:2, 2] - boundary)
     max_disp = float(np.nanmax(np.hypot(disp[:, 0], disp[:, 1])))

@@ -171,6 +171,15 @@ def format_report(report: dict[str, Any]) -> str:
         _field_line(report),
     ]
     lines += _glass_and_sensor_lines(report)
+    pose = report.get('sensor_pose')
+    if pose:
+        sigma = pose['corner_sigma_px']
+        lines.append(
+            f"sensor as assembled: lens axis at pixel ({pose['axis_px'][0]:.2f}, "
+            f"{pose['axis_px'][1]:.2f}), tilt {pose['tilt_x_deg']:g} / {pose['tilt_y_deg']:g} "
+            f"deg; corner sigma from the sensor tolerances {_num(sigma['total'])} px (offset "
+            f"x {_num(sigma['axis_offset_x_mm'])}, y {_num(sigma['axis_offset_y_mm'])}, tilt x "
+            f"{_num(sigma['tilt_x_deg'])}, y {_num(sigma['tilt_y_deg'])})")
     ri = report.get('relative_illumination')
     if ri:
         line = f"relative illumination: {ri['corner_ri']:.3f} at the raw corner"
@@ -204,6 +213,10 @@ def _glass_and_sensor_lines(report: dict[str, Any]) -> list[str]:
                      f"{sensor['defocus_mm']:+.4g} mm from the image of the scene: blur circle "
                      f"{sensor['blur_diameter_um']:.3g} um ({sensor['blur_diameter_px']:.3g} px)")
     return lines
+
+
+def _num(value: float | None) -> str:
+    return 'n/a' if value is None else f'{value:.3g}'
 
 
 def _px(value: float | None) -> str:
@@ -281,8 +294,8 @@ def cmd_project(args: argparse.Namespace) -> int:
     # Exact per point: through a tilted or decentred port in 3-D (docs/underwater.md).
     from mechdeconv_ros.model.underwater import project_points as project
 
-    directions = read_directions(args.input)
     model = _model(args)
+    directions = read_directions(args.input)
     u, v = project(model, directions[:, 0], directions[:, 1])
     out = sys.stdout
     for (tx, ty), col, row in zip(directions, u, v):
