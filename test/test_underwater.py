@@ -187,3 +187,32 @@ def test_zmx_object_in_water(tmp_path: Path) -> None:
                     'utf-8')
     with pytest.raises(LensImportError, match='water glass it can name'):
         import_zmx(path, 550.0)
+
+
+def test_the_shipped_example(tmp_path: Path) -> None:
+    import json
+    import subprocess
+    import sys
+
+    values = load_params_file(ROOT / 'config' / 'underwater_flat.yaml')
+    model = build_model(values)
+    errors = noncentral_errors(model)
+    # docs/underwater.md quotes these: 0.22 px at 1 m, 0.11 px at 4 m.
+    assert errors['noncentral_error_px_half'] == pytest.approx(0.223, abs=0.01)
+    assert errors['noncentral_error_px_twice'] == pytest.approx(0.112, abs=0.01)
+    # `mechdeconv project` (the CLI) through the port: the axis lands on the principal point.
+    csv = tmp_path / 'dirs.csv'
+    csv.write_text('0.0,0.0\n0.02,-0.01\n')
+    out = subprocess.run([sys.executable, '-m', 'mechdeconv_ros.tools.cli', 'project',
+                          '--params', str(ROOT / 'config' / 'underwater_flat.yaml'), str(csv)],
+                         capture_output=True, text=True, check=True).stdout.split()
+    first = [float(x) for x in out[0].split(',')]
+    assert first[2:] == pytest.approx([model.K[0, 2], model.K[1, 2]], abs=1e-6)
+    u, v = project_points(model, 0.02, -0.01)
+    assert [float(x) for x in out[1].split(',')][2:] == pytest.approx([float(u), float(v)])
+    report = json.loads(subprocess.run(
+        [sys.executable, '-m', 'mechdeconv_ros.tools.cli', 'info', '--json', '--params',
+         str(ROOT / 'config' / 'underwater_flat.yaml')], capture_output=True, text=True,
+        check=True).stdout)
+    assert report['noncentral_error_px_half'] == pytest.approx(
+        errors['noncentral_error_px_half'])
