@@ -46,6 +46,8 @@ from mechdeconv_ros.optics.surfaces import sag
 from mechdeconv_ros.optics.water import SEAWATER_SALINITY_PSU, water_index, WaterError
 import numpy as np
 
+#: A flat port's chief rays beyond the critical angle by this much are not aimed (rad).
+CRITICAL_MARGIN_RAD = math.radians(3.0)
 #: Radii sampled on each lens surface when checking that a dome clears it.
 _CLEARANCE_SAMPLES = 33
 
@@ -307,10 +309,42 @@ class PortedSource(LensSource):
         sensor_z, _ = self.image_plane(distance_mm)
         if guide is not None:
             guide = (self._combined_angles(guide[0], distance_mm), guide[1])
-        rays, offsets = trace_field_rays(
-            self.combined, self.combined_distance(distance_mm), sensor_z,
-            self._combined_angles(field_angle_rad, distance_mm), guide)
-        return -rays.y, -rays.dy / rays.dz, offsets
+        theta = self._combined_angles(field_angle_rad, distance_mm)
+        beyond = self._beyond_critical(theta, distance_mm)
+        heights = np.full(theta.shape, np.nan)
+        slopes = np.full(theta.shape, np.nan)
+        offsets = np.full(theta.shape, np.nan)
+        if (~beyond).any():
+            rays, aimed = trace_field_rays(self.combined, self.combined_distance(distance_mm),
+                                           sensor_z, theta[~beyond], guide)
+            heights[~beyond], slopes[~beyond] = -rays.y, -rays.dy / rays.dz
+            offsets[~beyond] = aimed
+        return heights, slopes, offsets
+
+    def _beyond_critical(self, theta_c: FloatArray, distance_mm: float) -> np.ndarray:
+        """
+        Return where a flat port surely stops the chief ray (no aiming there: it is slow).
+
+        In the water the chief ray runs at about alpha to the axis, tan(alpha) = Y / (z_E -
+        z_P), toward the apparent entrance pupil E; it passes into the air only below the
+        critical angle asin(1 / n_w) to the port's normal. Beyond it by MARGIN (the pupil's
+        aberration and the tilt) the angle is left out (NaN, the end of the field).
+        """
+        theta_c = np.asarray(theta_c, dtype=float)
+        port = self.port
+        if port is None or port.kind != 'flat' or self.medium_index <= 1.0:
+            return np.zeros(theta_c.shape, dtype=bool)
+        critical = math.asin(1.0 / self.medium_index)
+        margin = CRITICAL_MARGIN_RAD + math.hypot(port.tilt_x_rad, port.tilt_y_rad)
+        if math.isinf(distance_mm):
+            alpha = np.abs(theta_c)
+        else:
+            d_c = self.combined_distance(distance_mm)
+            z_scene = self._combined_h - d_c
+            to_pupil = entrance_pupil_z(self.combined) - z_scene
+            with np.errstate(invalid='ignore', over='ignore'):
+                alpha = np.arctan(np.abs(np.tan(theta_c)) * d_c / to_pupil)
+        return alpha > critical + margin
 
     def heights_to_sensor(self, tan_theta: FloatArray, distance_mm: float,
                           sensor_z_mm: float) -> FloatArray:
