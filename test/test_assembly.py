@@ -174,6 +174,18 @@ def test_camera_info_of_an_offset_sensor_is_exact_for_consumers():
     assert model.distortion_model == 'plumb_bob'
     assert _consumer_error(model) <= 0.05
     assert model.equivalent_max_error_px <= 0.05
+    # A consumer's rectification (cv2.initUndistortRectifyMap on K, D, to our K_new) against
+    # the traced maps.
+    import cv2
+    map_x, map_y = cv2.initUndistortRectifyMap(model.K, np.array(model.D), None, model.K_new,
+                                               (model.out_width, model.out_height),
+                                               cv2.CV_32FC1)
+    uu, vv = np.meshgrid(np.arange(0, model.out_width, 7), np.arange(0, model.out_height, 7))
+    raw = model.raw_from_rect(np.stack([uu, vv], axis=-1).astype(float))
+    inside = ((raw[..., 0] >= 0) & (raw[..., 0] <= model.width - 1) & (raw[..., 1] >= 0)
+              & (raw[..., 1] <= model.height - 1))
+    error = np.hypot(map_x[vv, uu] - raw[..., 0], map_y[vv, uu] - raw[..., 1])[inside]
+    assert inside.sum() > 1000 and error.max() <= 0.05
 
 
 def test_camera_info_of_a_tilted_sensor_fits_tangential_terms():
@@ -301,3 +313,64 @@ def test_datasheet_and_colour_channels_take_the_pose():
     assert colour.colour is not None
     frame = np.full((270, 480, 3), 128, np.uint8)
     assert colour.correct(frame, colours=(0, 1, 2)).shape == frame.shape
+
+
+@pytest.mark.parametrize('pose', [
+    {'sensor.axis_offset_x_mm': 0.15, 'sensor.axis_offset_y_mm': -0.1},
+    {'sensor.axis_offset_x_mm': 0.15, 'sensor.tilt_x_deg': 1.0, 'sensor.tilt_y_deg': -0.7}])
+def test_maps_are_the_projection(pose):
+    from mechdeconv_ros.imaging.remap import build_float_maps
+    from mechdeconv_ros.schema.params import load_params_file
+    values = load_params_file('config/wide_angle.yaml')
+    values.update({'sensor.width_px': 240, 'sensor.height_px': 150,
+                   'sensor.pixel_size_x_um': 16.0, 'sensor.pixel_size_y_um': 16.0,
+                   'output.alpha': 1.0, **pose})
+    model = build_model(values)
+    # The principal point (the lens axis's projection) on the half-pixel grid, off-centre.
+    assert model.K_new[0, 2] != (model.out_width - 1) / 2
+    assert 2 * model.K_new[0, 2] == round(2 * model.K_new[0, 2])
+    map_x, map_y = build_float_maps(model)
+    uu, vv = np.meshgrid(np.arange(model.out_width), np.arange(model.out_height))
+    raw = model.raw_from_rect(np.stack([uu, vv], axis=-1).astype(float))
+    valid = np.isfinite(raw[..., 0])
+    # alpha 1: the field ends inside the output. float32 maps: within 0.01 px (the remap
+    # itself rounds to 1/32 px).
+    assert 0 < valid.sum() < valid.size
+    assert np.max(np.abs(map_x[valid] - raw[..., 0][valid])) < 0.01
+    assert np.max(np.abs(map_y[valid] - raw[..., 1][valid])) < 0.01
+    # Invalid pixels point far outside the source (BORDER_CONSTANT paints them black).
+    outside = np.abs(map_x[~valid] - model.width / 2) > model.width / 2 + 500
+    assert np.all(outside)
+    # And the maps send each corrected pixel's direction where project puts it.
+    k = model.K_new
+    tx = (uu[valid][::97] - k[0, 2]) / k[0, 0]
+    ty = (vv[valid][::97] - k[1, 2]) / k[1, 1]
+    u, v = project(model, tx, ty)
+    assert_allclose(u, map_x[valid][::97], atol=0.01)
+    assert_allclose(v, map_y[valid][::97], atol=0.01)
+
+
+def test_cli_project_nan_where_no_chief_ray_passes(tmp_path, capsys):
+    path = tmp_path / 'in.csv'
+    # The Cooke triplet's clear apertures pass about 25 deg: 63 deg has no chief ray; 25 deg
+    # lands beyond the 1920 px sensor.
+    path.write_text('0.1,0\n0.47,0\n2,0\n')
+    status = main(['project', '--params', 'config/cooke_triplet.yaml', str(path)])
+    out, _ = capsys.readouterr()
+    rows = [line.split(',') for line in out.splitlines()]
+    assert status == 0 and len(rows) == 3
+    assert 959.5 < float(rows[0][2]) < 1919.5
+    assert float(rows[1][2]) > 1919.5
+    assert rows[2][2:] == ['nan', 'nan']
+
+
+@pytest.mark.parametrize('pose', [
+    {'sensor.axis_offset_x_mm': 0.2, 'sensor.axis_offset_y_mm': -0.15},
+    {'sensor.axis_offset_x_mm': 0.2, 'sensor.tilt_x_deg': 1.0, 'sensor.tilt_y_deg': -0.7}])
+def test_alpha_zero_keeps_only_valid_pixels_off_centre(pose):
+    from mechdeconv_ros.imaging.remap import Rectifier
+    model = build_model({**SIZE, **pose})
+    # The principal point follows the axis (the raw image is framed as it was).
+    assert model.K_new[0, 2] > 319.5 + 0.5 * 0.2 / model.pixel_mm[0]
+    out = Rectifier(model).correct(np.full((480, 640), 200, np.uint8))
+    assert int((out < 100).sum()) == 0

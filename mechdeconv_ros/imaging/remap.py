@@ -47,6 +47,15 @@ _OUTSIDE = -1000.0
 _BAND_PIXELS = 16384
 
 
+def set_remap_threads(threads: int) -> None:
+    """
+    Set the threads OpenCV's remap uses (``remap_threads``).
+
+    :param threads: the count; 0 or less = OpenCV's default (every core).
+    """
+    cv2.setNumThreads(threads if threads > 0 else -1)
+
+
 def _quadrant_scale(model: LensModel, xn: npt.NDArray[np.float32],
                     yn: npt.NDArray[np.float32],
                     gain_table: npt.NDArray[np.float64] | None = None) -> Any:
@@ -331,15 +340,20 @@ def _plane_maps(form: MapForm, xn: Any, yn: Any, q: Map, sigma: Map, rows: Any =
         # The quadrant row of each output row (mirrored above the principal point).
         line = np.arange(oh)
         quad_row = np.where(line >= ar, line - ar, tr + ar - 1 - line)
+    # Invalid pixels (outside the field: NaN q; a line that misses the plane: D <= 0) are
+    # looked for only where they can occur: D >= n_z - max|sigma| max|L|.
+    reach = float(np.max(np.abs(coefficients[4])) + np.max(np.abs(coefficients[5])))
+    check = bool(np.isnan(q).any()) or not (
+        form.nz - float(np.nanmax(np.abs(sigma))) * reach > 0.0)
     _plane_bands(form, coefficients, q, sigma, quad_row, cols, map_x, map_y,
-                 list(range(0, oh, band)), band)
+                 list(range(0, oh, band)), band, check)
     return map_x, map_y
 
 
 def _plane_bands(form: MapForm, coefficients: tuple[Any, ...], q: Map, sigma: Map,
                  quad_row: Any, cols: Any, map_x: Map, map_y: Map, tops: list[int],
-                 band: int) -> None:
-    """Compute the bands of the plane maps that start at ``tops``."""
+                 band: int, check: bool) -> None:
+    """Compute the bands of the plane maps that start at ``tops`` (``check``: invalid ones)."""
     ax, ay, bx, by, lx, ly = coefficients
     oh, ow = map_x.shape
     cu, cv, nz = np.float32(form.cu), np.float32(form.cv), np.float32(form.nz)
@@ -371,8 +385,8 @@ def _plane_bands(form: MapForm, coefficients: tuple[Any, ...], q: Map, sigma: Ma
         out_y += cv
         # NaN (outside the field) propagates into the sum; a line that does not meet the
         # plane in front (denominator <= 0) is invalid too.
-        if not math.isfinite(float(np.add.reduce(out_x, axis=None))) or \
-                float(denominator.min()) <= 0.0:
+        if check and (not math.isfinite(float(np.add.reduce(out_x, axis=None)))
+                      or float(denominator.min()) <= 0.0):
             invalid = ~np.isfinite(out_x) | ~(denominator > 0.0)
             np.putmask(out_x, invalid, np.float32(_OUTSIDE))
             np.putmask(out_y, invalid, np.float32(_OUTSIDE))

@@ -32,9 +32,9 @@ from __future__ import annotations
 import math
 from typing import Any, Mapping
 
-from mechdeconv_ros.lenses.lens_errors import FloatArray, ModelError
+from mechdeconv_ros.lenses.lens_errors import FloatArray, is_prescription_mode, ModelError
 from mechdeconv_ros.lenses.lens_source import (
-    FirstOrder, LensSource, NotApplicable, source_from_values, TracedSource)
+    FirstOrder, LensSource, NotApplicable, PrescriptionSource, ThickLensSource, TracedSource)
 from mechdeconv_ros.lenses.refusals import check_surfaces
 from mechdeconv_ros.lenses.sensor_plane import blur_diameter_mm, chief_ray_scale, sensor_plane
 from mechdeconv_ros.optics.glass import GlassError, lookup
@@ -205,8 +205,8 @@ class PortedSource(LensSource):
                            else wavelength_nm)
         self.raw_values = dict(values)
         lens_values = dict(values, **{'lens.wavelength_nm': wavelength})
-        lens = source_from_values(lens_values)
-        assert isinstance(lens, TracedSource)
+        lens: TracedSource = (PrescriptionSource(lens_values) if is_prescription_mode(lens_values)
+                              else ThickLensSource(lens_values))
         self.lens = lens
         self.values = lens.values
         self.mode = lens.mode

@@ -13,7 +13,8 @@ probe points themselves (K fixed: principal point at the traced axis), in pixels
 - rational_polynomial: the radial factor ``(1 + k1 r^2 + k2 r^4 + k3 r^6) / (1 + k4 r^2 +
   k5 r^4 + k6 r^6)`` and the same tangential terms: solved as the linear equation error
   ``x_d D = x N + T D_prev`` (``D_prev`` the previous iteration's denominator), iterated;
-- equidistant (cv2.fisheye): radial only (``x_d = theta_d x / r``), no tangential terms.
+- equidistant (cv2.fisheye): radial only (``x_d = theta_d x / r``), no tangential terms:
+  fitted only where the pinhole models cannot be (a field of 89 deg or more).
 
 Each is refined towards the minimax by Lawson's reweighting and measured, as the radial
 models, by its largest displacement (px) over the probe points. A tilt's keystone (a
@@ -59,6 +60,9 @@ def fit_tilted(theta: FloatArray, phi: FloatArray, u: FloatArray, v: FloatArray,
     for name in EQUIVALENT_MODELS:
         if fits and fits[-1].max_error_px <= EQUIVALENT_MAX_ERROR_PX and not every:
             break
+        if (name == 'equidistant' and not every
+                and any(math.isfinite(f.max_error_px) for f in fits)):
+            break       # radial only: it cannot beat a pinhole model's tangential terms
         if name != 'equidistant' and not (theta.size and theta.max() < math.radians(89.0)):
             fits.append(EquivalentFit(name, _zero(name), math.inf, math.inf))
             continue

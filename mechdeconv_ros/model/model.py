@@ -52,12 +52,10 @@ from types import SimpleNamespace
 from typing import Any, Mapping
 
 from mechdeconv_ros.lenses import refusals
-from mechdeconv_ros.lenses.datasheet import is_table_mode, TableSource
 from mechdeconv_ros.lenses.lens_errors import FloatArray, half_diagonal_mm, ModelError
 from mechdeconv_ros.lenses.lens_params import make_prescription
 from mechdeconv_ros.lenses.lens_source import LensSource
-from mechdeconv_ros.lenses.moving_source import source_for
-from mechdeconv_ros.lenses.port_source import has_port, PortedSource
+from mechdeconv_ros.lenses.sources import source_for
 from mechdeconv_ros.model import lateral_color, underwater
 from mechdeconv_ros.model.assembly import (
     axis_pixel, check_pose, raw_from_normalised, SensorPose, unproject_angles)
@@ -73,13 +71,11 @@ from mechdeconv_ros.optics.illumination import Illumination
 from mechdeconv_ros.optics.prescription import Prescription
 from mechdeconv_ros.schema.params import check_values, INTERPOLATIONS, MAX_FRAME_PIXELS, ParamValue
 import numpy as np
-import yaml
 
 #: The names callers import from here (some live in the modules the model is made of).
 __all__ = [
-    'build_model', 'camera_info_yaml', 'CV_INTERPOLATION', 'EQUIVALENT_MAX_ERROR_PX',
-    'EquivalentFit', 'LensModel', 'make_prescription', 'ModelError', 'radii_mean_error_percent',
-    'RadialMap']
+    'build_model', 'CV_INTERPOLATION', 'EQUIVALENT_MAX_ERROR_PX', 'EquivalentFit', 'LensModel',
+    'make_prescription', 'ModelError', 'RadialMap']
 
 #: OpenCV interpolation flags by the names ``output.interpolation`` accepts.
 CV_INTERPOLATION = {'nearest': 0, 'linear': 1, 'cubic': 2, 'lanczos4': 4}
@@ -283,29 +279,6 @@ def _json_safe(value: Any) -> Any:
     return value
 
 
-def radii_mean_error_percent(estimated_px: FloatArray, true_px: FloatArray,
-                             center_px: tuple[float, float]) -> float:
-    """
-    Return the paper's radii mean error (eq. 35-37), in percent.
-
-    For each point the radius from the principal point of the estimated (corrected) position is
-    compared with that of the true position: ``e = mean(|r_est - r_true| / r_true) * 100``.
-    Points on the axis (``r_true = 0``) carry no radius and are skipped.
-
-    :param estimated_px: ``(N, 2)`` estimated positions.
-    :param true_px: ``(N, 2)`` true positions.
-    :param center_px: the principal point both radii are measured from.
-    :return: the mean relative radius error in percent; NaN if no point qualifies.
-    """
-    center = np.asarray(center_px, dtype=np.float64)
-    r_est = np.hypot(*(np.asarray(estimated_px, dtype=np.float64) - center).T)
-    r_true = np.hypot(*(np.asarray(true_px, dtype=np.float64) - center).T)
-    keep = r_true > 1e-9
-    if not np.any(keep):
-        return math.nan
-    return float(np.mean(np.abs(r_est[keep] - r_true[keep]) / r_true[keep]) * 100.0)
-
-
 def _image_size(values: Mapping[str, Any], width: int, height: int) -> tuple[int, int, int, int]:
     w = int(values['sensor.width_px']) or int(width)
     h = int(values['sensor.height_px']) or int(height)
@@ -349,20 +322,6 @@ def _scale_k(boundary_ideal: FloatArray, principal: tuple[float, float], disk: f
     return float(k0 * (1.0 - alpha) + k1 * alpha)
 
 
-def _default_source(vals: Mapping[str, Any]) -> LensSource:
-    """Return the lens of the values: a datasheet table, a lens behind a port, or source_for."""
-    if is_table_mode(vals):
-        if has_port(vals):
-            name = 'port.type' if vals['port.type'] != 'none' else 'scene.medium'
-            raise ModelError(name, 'a datasheet lens (lens.datasheet.*) has no entrance pupil or '
-                                   'surfaces to trace through a port or water: give the lens '
-                                   'as a prescription (lens.surfaces.*) or import its .zmx')
-        return TableSource(vals)
-    if has_port(vals):
-        return PortedSource(vals)
-    return source_for(vals)
-
-
 def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
                 source: LensSource | None = None) -> LensModel:
     """
@@ -372,19 +331,13 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
     :param width: the incoming image width, used when ``sensor.width_px`` is 0.
     :param height: the incoming image height, used when ``sensor.height_px`` is 0.
     :param source: the lens; by default the one the ``lens.*`` values describe
-        (:func:`mechdeconv_ros.lenses.moving_source.source_for`: the seam's
-        ``source_from_values``, or a moving prescription when a ``lens.m.joint`` is set).
+        (:func:`mechdeconv_ros.lenses.sources.source_for`).
     :return: the model.
     :raises ModelError: naming the parameter at fault when the values describe no camera.
     """
-    try:
-        vals = check_values(values)
-    except ValueError as err:
-        name = str(err).split(':', 1)[0].split('[', 1)[0].strip(" '")
-        raise ModelError(name, str(err).split(':', 1)[-1].strip()) from None
+    vals = _checked(values)
     if source is None:
-        # A datasheet table, a lens whose groups move, else the traced lens of the lens.* values.
-        source = _default_source(vals)
+        source = source_for(vals)
     # The rules of every source (paraxial), then the ones on its surfaces (docs/design.md s. 7).
     f, distance, sensor_z, v = refusals.check_first_order(vals, source)
     lateral_color.check_switch(vals)
@@ -397,13 +350,62 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
     # The principal point is where the lens axis meets the sensor (sensor.axis_offset_*).
     cx, cy = axis_pixel(vals, w, h, (px, py))
     K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
-
     projection = str(vals['output.projection'])
-    cap = field_cap_rad(distance)
+    coarse = _trace_field(source, distance, v, half_diagonal_mm(w, h, (px, py)))
+    camera = SimpleNamespace(values=vals, K=K, pixel_mm=(px, py), field_curve=coarse,
+                             source=source)
+    check_pose(vals, source, camera, w, h, sensor_z)
+    outline = _raw_outline(camera, w, h, projection)
+    K_new = _corrected_camera(outline, (ow, oh), fx, fy, float(vals['output.alpha']))
+    k, principal = K_new[0, 0] / fx, (K_new[0, 2], K_new[1, 2])
 
-    # Pass 1: trace the field by angle (theta uniform) far enough to cover the raw image (its
-    # edge, not the pixel centre), or to the end of the field the lens passes.
-    edge_real = half_diagonal_mm(w, h, (px, py))
+    # Pass 2: the dense curve in the output projection from 0 to just past the output corner
+    # (and the raw image edge).
+    out_corner = math.hypot(max(principal[0] + 0.5, ow - 0.5 - principal[0]) / (k * fx),
+                            max(principal[1] + 0.5, oh - 0.5 - principal[1]) / (k * fy)) * v
+    raw_corner_ideal = float(np.nanmax(np.hypot(*outline.ideal.T))) * v
+    reach = min(1.02 * max(out_corner, raw_corner_ideal), outline.disk * v * 1.001)
+    curve = resample(coarse, v, reach, CURVE_SAMPLES, projection)
+
+    fits, chosen = _equivalent(camera, v, w, h, warnings)
+    # How far the lens moves the outline from where the pinhole K puts its directions.
+    disp = outline.ideal * np.array([fx, fy]) + K[:2, 2] - outline.points
+    max_disp = float(np.nanmax(np.hypot(disp[:, 0], disp[:, 1])))
+
+    model = LensModel(
+        values=vals, source=source, width=w, height=h, out_width=ow,
+        out_height=oh, pixel_mm=(px, py), focal_length_mm=f, image_distance_mm=v, curve=curve,
+        K=K, K_new=K_new, D=chosen.D, distortion_model=chosen.distortion_model,
+        fit_rms_px=chosen.rms_error_px, equivalent_max_error_px=chosen.max_error_px,
+        equivalent_fits=tuple(fits),
+        max_displacement_px=max_disp,
+        interpolation=CV_INTERPOLATION[str(vals['output.interpolation'])],
+        projection=projection, field_curve=coarse, warnings=tuple(warnings))
+    if vals['output.lateral_color_correction']:
+        model.lateral_color()       # its three traces: a channel no ray passes is refused now
+    return model
+
+
+def _checked(values: Mapping[str, Any]) -> dict[str, ParamValue]:
+    """Return the checked values; a value the schema refuses becomes a ModelError naming it."""
+    try:
+        return check_values(values)
+    except ValueError as err:
+        name = str(err).split(':', 1)[0].split('[', 1)[0].strip(" '")
+        raise ModelError(name, str(err).split(':', 1)[-1].strip()) from None
+
+
+def _trace_field(source: LensSource, distance: float, v: float, edge_real: float) -> RadialMap:
+    """
+    Pass 1: trace the field by angle (theta uniform) far enough to cover the raw image.
+
+    That is to its edge (``edge_real``, not the pixel centre), or to the end of the field the
+    lens passes.
+
+    :raises ModelError: naming the lens when not even the axial ray passes, the stop when
+        the field is blocked close to the axis.
+    """
+    cap = field_cap_rad(distance)
     theta_max = min(cap, 1.5 * edge_real / v)
     for _ in range(12):
         coarse = trace_curve(source, distance, v, theta_max * v, COARSE_SAMPLES, 'equidistant')
@@ -421,97 +423,81 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
                          f'{edge_real:.3g} mm half-diagonal: the stop position or the lens '
                          'blocks the field, or the sensor is far larger than the image the '
                          'lens forms')
-    # The raw image's outline and centre as ideal normalised coordinates (through the traced
-    # directions of their pixels: the sensor's offset and tilt included).
-    camera = SimpleNamespace(values=vals, K=K, pixel_mm=(px, py), field_curve=coarse,
-                             source=source)
-    check_pose(vals, source, camera, w, h, sensor_z)
+    return coarse
+
+
+@dataclass(frozen=True)
+class _Outline:
+    """The raw image's outline (pixels) and centre as ideal normalised coordinates."""
+
+    points: FloatArray      # (N, 2) raw pixels on the outer edge
+    ideal: FloatArray       # (N, 2) their directions, normalised in the output projection
+    centre: tuple[float, float]     # the raw image centre's direction, likewise
+    disk: float             # the valid field's edge in the output projection (normalised)
+
+
+def _raw_outline(camera: Any, w: int, h: int, projection: str) -> _Outline:
+    """
+    Return the raw image's outline through the traced directions of its pixels.
+
+    The sensor's offset and tilt are included (:func:`mechdeconv_ros.model.assembly.
+    unproject_angles`); a pixel beyond the valid field takes its edge.
+    """
+    coarse = camera.field_curve
     boundary = boundary_points(w, h)
-    b_theta, b_phi = unproject_angles(camera, boundary[:, 0], boundary[:, 1])
-    b_theta = np.where(np.isfinite(b_theta), b_theta, coarse.max_field_angle_rad)
-    b_radius = projected(b_theta, projection)
-    boundary_ideal = np.stack([b_radius * np.cos(b_phi), b_radius * np.sin(b_phi)], axis=1)
+    theta, phi = unproject_angles(camera, boundary[:, 0], boundary[:, 1])
+    theta = np.where(np.isfinite(theta), theta, coarse.max_field_angle_rad)
+    radius = projected(theta, projection)
+    ideal = np.stack([radius * np.cos(phi), radius * np.sin(phi)], axis=1)
     c_theta, c_phi = unproject_angles(camera, np.array([(w - 1) / 2.0]),
                                       np.array([(h - 1) / 2.0]))
     c_radius = projected(np.nan_to_num(c_theta), projection)
     centre = (float(c_radius[0] * np.cos(c_phi[0])), float(c_radius[0] * np.sin(c_phi[0])))
     disk = float(projected(np.array(coarse.max_field_angle_rad), projection))
-    alpha = float(vals['output.alpha'])
-    # The corrected image frames the raw one: the raw centre's direction near its centre.
-    # The principal point (where the lens axis projects) is rounded to half a pixel, so the
-    # maps mirror about it (imaging/remap.py); the zoom is then chosen for that point.
+    return _Outline(boundary, ideal, centre, disk)
+
+
+def _corrected_camera(outline: _Outline, size: tuple[int, int], fx: float, fy: float,
+                      alpha: float) -> FloatArray:
+    """
+    Return K_new: the zoom of ``output.alpha`` and the principal point framing the raw image.
+
+    The raw centre's direction lands near the output centre; the principal point (where the
+    lens axis projects) is rounded to half a pixel, so the maps mirror about it
+    (imaging/remap.py), and the zoom is then chosen for that point (docs/design.md s. 2.16).
+    """
+    ow, oh = size
     middle = ((ow - 1) / 2.0, (oh - 1) / 2.0)
-    k = _scale_k(boundary_ideal - np.array(centre), middle, disk, (ow, oh), fx, fy, alpha)
+    centre = outline.centre
+    k = _scale_k(outline.ideal - np.array(centre), middle, outline.disk, size, fx, fy, alpha)
     principal = (round(2.0 * (middle[0] - k * fx * centre[0])) / 2.0,
                  round(2.0 * (middle[1] - k * fy * centre[1])) / 2.0)
     if principal != middle:
-        k = _scale_k(boundary_ideal, principal, disk, (ow, oh), fx, fy, alpha)
-    K_new = np.array([[k * fx, 0.0, principal[0]], [0.0, k * fy, principal[1]],
-                      [0.0, 0.0, 1.0]])
+        k = _scale_k(outline.ideal, principal, outline.disk, size, fx, fy, alpha)
+    return np.array([[k * fx, 0.0, principal[0]], [0.0, k * fy, principal[1]],
+                     [0.0, 0.0, 1.0]])
 
-    # Pass 2: the dense curve in the output projection from 0 to just past the output corner
-    # (and the raw image edge).
-    out_corner = math.hypot(max(principal[0] + 0.5, ow - 0.5 - principal[0]) / (k * fx),
-                            max(principal[1] + 0.5, oh - 0.5 - principal[1]) / (k * fy)) * v
-    raw_corner_ideal = float(np.nanmax(np.hypot(*boundary_ideal.T))) * v
-    reach = min(1.02 * max(out_corner, raw_corner_ideal), disk * v * 1.001)
-    curve = resample(coarse, v, reach, CURVE_SAMPLES, projection)
 
-    if SensorPose.from_values(vals).tilted:
-        # No rotational symmetry: the consumer models in two dimensions, with their tangential
-        # terms, on the traced directions of the probe pixels (model/camera_info_tilt.py).
-        probe = raw_probe_points(w, h)
-        p_theta, p_phi = unproject_angles(camera, probe[:, 0], probe[:, 1])
-        fits = fit_tilted(p_theta, p_phi, probe[:, 0], probe[:, 1], K)
-    else:
-        fits = fit_equivalent(coarse, v, K, w, h)
+def _equivalent(camera: Any, v: float, w: int, h: int,
+                warnings: list[str]) -> tuple[list[EquivalentFit], EquivalentFit]:
+    """
+    Fit camera_info's models: radially (section 2.8), or in 2-D for a tilted sensor.
+
+    A tilt no model represents within EQUIVALENT_MAX_ERROR_PX adds a warning (``info``,
+    ``/diagnostics``): the best fit is published with its error.
+    """
+    if not SensorPose.from_values(camera.values).tilted:
+        fits = fit_equivalent(camera.field_curve, v, camera.K, w, h)
+        return fits, choose_equivalent(fits)
+    # No rotational symmetry: the consumer models in two dimensions, with their tangential
+    # terms, on the traced directions of the probe pixels (model/camera_info_tilt.py).
+    probe = raw_probe_points(w, h)
+    theta, phi = unproject_angles(camera, probe[:, 0], probe[:, 1])
+    fits = fit_tilted(theta, phi, probe[:, 0], probe[:, 1], camera.K)
     chosen = choose_equivalent(fits)
-    if SensorPose.from_values(vals).tilted and chosen.max_error_px > EQUIVALENT_MAX_ERROR_PX:
+    if chosen.max_error_px > EQUIVALENT_MAX_ERROR_PX:
         warnings.append(f'sensor.tilt_x_deg/tilt_y_deg: no ROS distortion model represents '
                         f'this tilt within {EQUIVALENT_MAX_ERROR_PX:g} px: camera_info carries '
                         f'the best fit, {chosen.distortion_model}, off by up to '
                         f'{chosen.max_error_px:.3g} px (image_rect is exact)')
-    # How far the lens moves the outline from where the pinhole K puts its directions.
-    disp = (boundary_ideal * np.array([fx, fy]) + K[:2, 2] - boundary)
-    max_disp = float(np.nanmax(np.hypot(disp[:, 0], disp[:, 1])))
-
-    model = LensModel(
-        values=vals, source=source, width=w, height=h, out_width=ow,
-        out_height=oh, pixel_mm=(px, py), focal_length_mm=f, image_distance_mm=v, curve=curve,
-        K=K, K_new=K_new, D=chosen.D, distortion_model=chosen.distortion_model,
-        fit_rms_px=chosen.rms_error_px, equivalent_max_error_px=chosen.max_error_px,
-        equivalent_fits=tuple(fits),
-        max_displacement_px=max_disp,
-        interpolation=CV_INTERPOLATION[str(vals['output.interpolation'])],
-        projection=projection, field_curve=coarse, warnings=tuple(warnings))
-    if vals['output.lateral_color_correction']:
-        model.lateral_color()       # its three traces: a channel no ray passes is refused now
-    return model
-
-
-def camera_info_yaml(model: LensModel, camera_name: str = 'mechdeconv') -> str:
-    """
-    Write the raw camera as camera_calibration_parsers YAML (what camera_info_manager loads).
-
-    K and D describe the raw camera (D = the equivalent coefficients), R is the identity and
-    P = ``[K_new | 0]``: the same content the node publishes on ``camera_info``.
-
-    :param model: the lens model.
-    :param camera_name: the ``camera_name`` field.
-    :return: YAML text.
-    """
-    def matrix(rows: int, cols: int, data: Any) -> dict[str, Any]:
-        return {'rows': rows, 'cols': cols,
-                'data': [float(x) for x in np.asarray(data, dtype=np.float64).ravel()]}
-
-    document = {
-        'image_width': model.width,
-        'image_height': model.height,
-        'camera_name': camera_name,
-        'camera_matrix': matrix(3, 3, model.K),
-        'distortion_model': model.distortion_model,
-        'distortion_coefficients': matrix(1, len(model.D), model.D),
-        'rectification_matrix': matrix(3, 3, np.eye(3)),
-        'projection_matrix': matrix(3, 4, model.P),
-    }
-    return yaml.safe_dump(document, sort_keys=False, default_flow_style=None)
+    return fits, chosen
