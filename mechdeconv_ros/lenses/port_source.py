@@ -48,6 +48,8 @@ import numpy as np
 
 #: A flat port's chief rays beyond the critical angle by this much are not aimed (rad).
 CRITICAL_MARGIN_RAD = math.radians(3.0)
+#: Field angles of the ladder that starts the 3-D aiming (PortedSource.symmetric_slopes).
+LADDER_SAMPLES = 257
 #: Radii sampled on each lens surface when checking that a dome clears it.
 _CLEARANCE_SAMPLES = 33
 
@@ -397,8 +399,15 @@ class PortedSource(LensSource):
         radius = np.hypot(tx, ty)
         order = np.argsort(radius, kind='stable')
         theta = self._combined_angles(np.arctan(radius[order]), distance_mm)
-        rays = aim_chief_rays(self.combined, self.combined_distance(distance_mm),
-                              field_angle_rad=theta)
+        d_c = self.combined_distance(distance_mm)
+        # A dense ladder aimed by continuation first (a wide lens's chief rays move far from
+        # the paraxial ones), its offsets then guide the points' own aiming.
+        top = float(np.nanmax(theta)) if theta.size else 0.0
+        ladder = np.linspace(0.0, top, LADDER_SAMPLES)
+        _, offsets = trace_field_rays(self.combined, d_c, self.image_plane(distance_mm)[0],
+                                      ladder)
+        rays = aim_chief_rays(self.combined, d_c, field_angle_rad=theta,
+                              guide=(ladder, offsets))
         slope = np.empty(radius.shape)
         slope[order] = rays.dy / rays.dz
         phi = np.arctan2(ty, tx)
