@@ -374,3 +374,22 @@ def test_alpha_zero_keeps_only_valid_pixels_off_centre(pose):
     assert model.K_new[0, 2] > 319.5 + 0.5 * 0.2 / model.pixel_mm[0]
     out = Rectifier(model).correct(np.full((480, 640), 200, np.uint8))
     assert int((out < 100).sum()) == 0
+
+
+def test_info_reports_the_sensor_tolerances_at_the_corner(capsys):
+    import json
+    status = main(['info', '--json', '--width', '640', '--height', '480', '-p',
+                   'sensor.tilt_x_deg=0.5', '-p', 'sensor.tolerance.axis_offset_x_mm=0.01'])
+    report = json.loads(capsys.readouterr()[0])
+    pose = report['sensor_pose']
+    sigma = pose['corner_sigma_px']
+    px = build_model(SIZE).pixel_mm[0]
+    assert status == 0 and pose['tilt_x_deg'] == 0.5
+    # An offset moves every pixel by itself; a tilt the corner by a fraction of a pixel.
+    assert sigma['axis_offset_x_mm'] == pytest.approx(0.01 / px, rel=1e-6)
+    assert 0.0 < sigma['tilt_x_deg'] < sigma['axis_offset_x_mm']
+    assert sigma['total'] == pytest.approx(math.sqrt(sum(
+        sigma[k] ** 2 for k in ('axis_offset_x_mm', 'axis_offset_y_mm', 'tilt_x_deg',
+                                'tilt_y_deg'))))
+    status = main(['info', '--width', '640', '--height', '480'])
+    assert 'corner sigma from the sensor tolerances' in capsys.readouterr()[0]
