@@ -61,6 +61,12 @@ def test_issue_contract_names_are_declared():
     contract += ['lens.tolerance.image_distance_mm']
     for name in ('check.rate_hz', 'check.window', 'check.max_rms_px', 'check.apply'):
         assert name in params.SPECS and name not in params.MODEL_PARAMS
+    # Issue 27: underwater (the scene's medium and the port).
+    contract += ['scene.medium', 'scene.salinity_psu', 'scene.temperature_c',
+                 'scene.medium_index', 'port.type', 'port.thickness_mm', 'port.glass',
+                 'port.refractive_index', 'port.distance_mm', 'port.tilt_x_deg',
+                 'port.tilt_y_deg', 'port.radius_mm', 'port.center_offset_mm',
+                 'port.decenter_x_mm', 'port.decenter_y_mm']
     assert set(contract) <= set(params.SPECS)
     assert set(contract) == set(params.MODEL_PARAMS)
 

@@ -33,6 +33,7 @@ from typing import Any, Sequence
 
 import cv2
 from mechdeconv_ros.imaging.channel_remap import ChannelRemap
+from mechdeconv_ros.model import underwater
 from mechdeconv_ros.model.assembly import curve_tables, MapForm
 from mechdeconv_ros.model.lateral_color import channel_model
 from mechdeconv_ros.model.model import LensModel
@@ -230,6 +231,20 @@ def _quadrant_axes(model: LensModel) -> tuple[Any, Any, Any, Any] | None:
 def _build_maps(model: LensModel, gain_table: npt.NDArray[np.float64] | None
                 ) -> tuple[Map, Map, Map | None]:
     """Build the float maps and, given a gain table over the curve's ideal radii, the gain."""
+    map_x, map_y, gain = _build_radial_maps(model, gain_table)
+    # A tilted flat port or a decentred dome: the exact 3-D residual, splined from a grid
+    # (mechdeconv_ros.model.underwater.residual_maps); pixels outside stay outside.
+    residual = underwater.residual_maps(model)
+    if residual is not None:
+        inside = map_x != np.float32(_OUTSIDE)
+        map_x[inside] += residual[0][inside]
+        map_y[inside] += residual[1][inside]
+    return map_x, map_y, gain
+
+
+def _build_radial_maps(model: LensModel, gain_table: npt.NDArray[np.float64] | None
+                       ) -> tuple[Map, Map, Map | None]:
+    """Build the maps of the rotationally symmetric model (and its sensor pose)."""
     axes = _quadrant_axes(model)
     if axes is None:
         return _build_general_maps(model, gain_table)

@@ -47,6 +47,7 @@ from typing import Any, Callable
 from mechdeconv_ros.lenses.params_file import Imported
 from mechdeconv_ros.lenses.zmx import LensImportError, read, ZmxLens, ZmxSurface
 from mechdeconv_ros.optics.prescription import Paraxial, paraxial, Prescription, Surface
+from mechdeconv_ros.optics.water import water_index, WaterError
 from mechdeconv_ros.schema.params import ASPHERE_POWERS, check_values, SPECS
 
 #: The GLAS line's nd / vd when a catalog glass carries no data of its own (Zemax writes
@@ -233,6 +234,8 @@ def zmx_values(lens: ZmxLens, wavelength_nm: float | None = None,
                                        else distance + para.front_principal_z_mm)
     _optional_values(surfaces, media, wavelength, out)
     out.values.update(lens.sensor_pose)   # a coordinate break before the image (zmx)
+    if lens.object_medium:
+        _water_object(lens, wavelength, out)
     out.comments[:0] = _comments(lens, wavelength, para.efl_mm, distance)
     _check(lens, out)
     return out
@@ -330,6 +333,28 @@ def _optional_values(surfaces: list[ZmxSurface], media: list[Medium], wavelength
             out.values[name] = value
         else:
             out.comments.append(f'{name}: {value} (not a parameter of this build)')
+
+
+def _water_object(lens: ZmxLens, wavelength: float, out: Imported) -> None:
+    """
+    Read an object space of water as ``scene.medium_index`` at the wavelength.
+
+    The index is Quan & Fry's (20 degC; seawater 35 PSU). The surfaces stay the file's: a
+    plane-parallel first element (a flat port) is traced exactly as lens surfaces, not turned
+    into ``port.*`` (that would guess which surfaces are the housing's).
+    """
+    salinity = 35.0 if lens.object_medium == 'seawater' else 0.0
+    try:
+        index = water_index(wavelength, 20.0, salinity)
+    except WaterError as err:
+        raise LensImportError(f'{lens.path}: the object space is {lens.object_medium}: '
+                              f'{err}') from None
+    out.values['scene.medium_index'] = index
+    out.warnings.append(
+        f'the object space is {lens.object_medium}: scene.medium_index = {index:.6f} (Quan & '
+        f'Fry 1995 at {wavelength:g} nm, 20 degC, {salinity:g} PSU); a flat port in the file '
+        'stays lens surfaces (exact, but port.* does not describe it): set scene.medium and '
+        'port.* instead to vary the water or the port')
 
 
 def _aperture(lens: ZmxLens, built: list[Surface], stop: int, out: Imported) -> float:

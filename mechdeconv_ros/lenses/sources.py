@@ -7,13 +7,16 @@ Pure Python, no ROS. :func:`source_for` is the dispatch of docs/design.md sectio
 order (the first that applies):
 
 1. a datasheet table (``lens.datasheet.field_angle_deg`` not empty):
-   :class:`~mechdeconv_ros.lenses.datasheet.TableSource`;
-2. a prescription whose gaps move with a joint (a ``lens.m.joint`` set, m in
+   :class:`~mechdeconv_ros.lenses.datasheet.TableSource` (a port or water with it is refused);
+2. a port or water in front of the lens (``port.type`` not ``none``, ``scene.medium`` not
+   ``air`` or ``scene.medium_index`` > 0): :class:`~mechdeconv_ros.lenses.port_source.PortedSource`
+   (the lens of 4 or 5 behind it; refused with a moving lens);
+3. a prescription whose gaps move with a joint (a ``lens.m.joint`` set, m in
    :data:`~mechdeconv_ros.schema.params.MECHANISMS`):
    :class:`~mechdeconv_ros.lenses.moving_source.MovingSource` at the given lens state;
-3. a surface prescription (``lens.surfaces.radius_mm`` given):
+4. a surface prescription (``lens.surfaces.radius_mm`` given):
    :class:`~mechdeconv_ros.lenses.lens_source.PrescriptionSource`;
-4. else the paper's thick lens: :class:`~mechdeconv_ros.lenses.lens_source.ThickLensSource`.
+5. else the paper's thick lens: :class:`~mechdeconv_ros.lenses.lens_source.ThickLensSource`.
 
 :func:`~mechdeconv_ros.model.model.build_model` calls it when it is given no source, and so do
 the command line and the demo for a moving lens at a lens state. A new kind of lens adds one
@@ -25,9 +28,10 @@ from __future__ import annotations
 from typing import Any, Mapping
 
 from mechdeconv_ros.lenses.datasheet import is_table_mode, TableSource
-from mechdeconv_ros.lenses.lens_errors import is_prescription_mode
+from mechdeconv_ros.lenses.lens_errors import is_prescription_mode, ModelError
 from mechdeconv_ros.lenses.lens_source import LensSource, PrescriptionSource, ThickLensSource
 from mechdeconv_ros.lenses.moving_source import MovingSource
+from mechdeconv_ros.lenses.port_source import has_port, PortedSource
 from mechdeconv_ros.schema.params import MECHANISMS
 
 
@@ -53,7 +57,15 @@ def source_for(values: Mapping[str, Any],
     :raises ModelError: naming the parameter when the values describe no lens.
     """
     if is_table_mode(values):
+        if has_port(values):
+            name = 'port.type' if values.get('port.type', 'none') != 'none' else 'scene.medium'
+            raise ModelError(name, 'a datasheet lens (lens.datasheet.*) has no entrance pupil or '
+                                   'surfaces to trace through a port or water: give the lens '
+                                   'as a prescription (lens.surfaces.*) or import its .zmx')
         return TableSource(values)
+    if has_port(values):
+        # docs/underwater.md: the lens (in air) behind a port, the scene in water.
+        return PortedSource(values)
     if is_moving(values):
         return MovingSource(values, state)
     if is_prescription_mode(values):

@@ -102,6 +102,9 @@ _REFUSED_APERTURES = {
 #: Lens units and their length in mm.
 _UNITS = {'MM': 1.0, 'CM': 10.0, 'IN': 25.4, 'METER': 1000.0, 'M': 1000.0}
 
+#: Object-space glass names read as water (the index then comes from Quan & Fry 1995).
+WATER_GLASSES = {'WATER': 'water', 'H2O': 'water', 'SEAWATER': 'seawater',
+                 'SEA_WATER': 'seawater'}
 #: A DISZ at or beyond this (mm) is an object at infinity (Zemax writes INFINITY or 1e10).
 INFINITE_DISTANCE_MM = 1.0e9
 
@@ -170,6 +173,8 @@ class ZmxLens:
     configurations: int = 1
     unit_mm: float = 1.0
     notes: list[str] = field(default_factory=list)
+    #: ``''`` (air), ``'water'`` or ``'seawater'``: the object space's medium.
+    object_medium: str = ''
     #: The sensor's pose from a coordinate break before the image surface (parameter values).
     sensor_pose: dict[str, float] = field(default_factory=dict)
 
@@ -520,10 +525,14 @@ def _check_whole(lens: ZmxLens, seen_keyword: bool) -> None:
         if surface.thickness is None:
             raise LensImportError(f'{path}: line {surface.line}: surface {surface.number} has '
                                   'no thickness (DISZ): a truncated file?')
-    if lens.surfaces[0].glass and lens.surfaces[0].glass.upper() != 'AIR':
+    object_glass = (lens.surfaces[0].glass or '').upper()
+    if object_glass in WATER_GLASSES:
+        lens.object_medium = WATER_GLASSES[object_glass]
+    elif object_glass and object_glass != 'AIR':
         raise LensImportError(f'{path}: line {lens.surfaces[0].glass_line}: the object space is'
                               f' glass {lens.surfaces[0].glass}: this model has its object in '
-                              'air')
+                              'air or in water (a water glass it can name: '
+                              f'{", ".join(sorted(WATER_GLASSES))}; docs/underwater.md)')
     for surface in lens.surfaces[1:-1]:
         if math.isinf(surface.thickness or 0.0):
             raise LensImportError(f'{path}: line {surface.line}: surface {surface.number}: '

@@ -128,6 +128,9 @@ def has_dispersion(values: Mapping[str, Any]) -> bool:
     :return: prescription mode: a non-blank ``lens.surfaces.glass`` entry; thick lens: a
         non-blank ``lens.glass``.
     """
+    if str(values.get('scene.medium', 'air')) != 'air' and not float(
+            values.get('scene.medium_index', 0.0)):
+        return True     # the water's own dispersion (Quan & Fry), docs/underwater.md
     if is_prescription_mode(values):
         return any(str(name).strip() for name in values.get('lens.surfaces.glass', []) or [])
     return bool(str(values.get('lens.glass', '') or '').strip())
@@ -346,7 +349,8 @@ def trace_channels(model: ModelView) -> LateralColor:
     if not has_dispersion(values):
         check_switch(dict(values, **{SWITCH: True}))
     base = model.source
-    if not isinstance(base, TracedSource):
+    at_wavelength = getattr(base, 'channel_source', None)
+    if not isinstance(base, TracedSource) and at_wavelength is None:
         raise ModelError(SWITCH, f'the {base.mode} lens source has no surfaces to trace at '
                                  'other wavelengths')
     distance = _distance(values)
@@ -358,7 +362,10 @@ def trace_channels(model: ModelView) -> LateralColor:
         if wavelength == focus:
             traced = field          # the model's own lens and trace (the glass at lambda_0)
         else:
-            source = ChannelSource(base, wavelength, values)
+            # A lens behind a port in water traces its own channels (lens, port and water at
+            # the wavelength: lenses.port_source.PortedSource.channel_source).
+            source = (at_wavelength(wavelength) if at_wavelength is not None
+                      else ChannelSource(base, wavelength, values))
             traced = trace_angles(source, distance, v, field.field_angle_rad, field)
         if traced.ideal_mm.size < 16:
             raise ModelError(WAVELENGTHS, f'{name} at {wavelength:g} nm: no chief ray reaches '

@@ -56,7 +56,7 @@ from mechdeconv_ros.lenses.lens_errors import FloatArray, half_diagonal_mm, Mode
 from mechdeconv_ros.lenses.lens_params import make_prescription
 from mechdeconv_ros.lenses.lens_source import LensSource
 from mechdeconv_ros.lenses.sources import source_for
-from mechdeconv_ros.model import lateral_color
+from mechdeconv_ros.model import lateral_color, underwater
 from mechdeconv_ros.model.assembly import (
     axis_pixel, check_pose, raw_from_normalised, SensorPose, unproject_angles)
 from mechdeconv_ros.model.camera_info_fit import (
@@ -252,6 +252,7 @@ class LensModel:
             'relative_illumination': illumination,
             'lateral_color': colour,
         })
+        out.update(underwater.noncentral_errors(self))
         field = out.pop('_field_curve')
         theta, real = field['theta_rad'], field['real_mm']
         pick = np.unique(np.linspace(0, theta.size - 1, min(theta.size, 257)).round()

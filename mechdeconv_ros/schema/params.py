@@ -35,6 +35,9 @@ ParamValue = Union[bool, int, float, str, list]
 ASPHERE_POWERS = (4, 6, 8, 10, 12, 14, 16)
 #: Allowed values of ``output.projection``: the corrected image's projection.
 PROJECTIONS = ('pinhole', 'equidistant')
+#: Allowed values of ``scene.medium`` and ``port.type`` (issue 27, underwater).
+MEDIA = ('air', 'water', 'seawater')
+PORT_TYPES = ('none', 'flat', 'dome')
 #: Allowed values of ``image_transport``: what the node subscribes to.
 IMAGE_TRANSPORTS = ('raw', 'compressed')
 
@@ -78,7 +81,7 @@ class ParamSpec:
     @property
     def is_model(self) -> bool:
         """Return True when a change of this parameter changes the lens model or its maps."""
-        return self.group in ('lens', 'sensor', 'scene', 'output')
+        return self.group in ('lens', 'sensor', 'scene', 'output', 'port')
 
 
 def _d(name: str, default: float, unit: str, description: str,
@@ -129,6 +132,60 @@ def _moving_specs(mechanism: str) -> tuple[ParamSpec, ...]:
            '(len(positions) x len(surfaces)): row j holds them at positions[j].',
            0.0, 1.0e4),
     )
+
+
+#: The water and the port in front of the lens (issue 27, docs/underwater.md): their own block.
+UNDERWATER_SPECS: tuple[ParamSpec, ...] = (
+    ParamSpec('scene.medium', 'string', 'air', '',
+              'Medium of the scene: air, water (fresh, salinity 0) or seawater '
+              '(scene.salinity_psu); its index relative to air from Quan & Fry (1995), '
+              '400-700 nm, 0-30 degC, 0-35 PSU, refused outside. scene.distance_mm stays '
+              'measured from the front principal plane of the lens alone.', choices=MEDIA),
+    _d('scene.salinity_psu', 35.0, 'PSU',
+       'Salinity of seawater (scene.medium seawater); 0-35 PSU (the range of the formula).',
+       0.0, 1.0e3),
+    _d('scene.temperature_c', 20.0, 'degC',
+       'Temperature of the water; 0-30 degC (the range of the formula).', -1.0e3, 1.0e3),
+    _d('scene.medium_index', 0.0, '1',
+       'Index of the medium of the scene relative to air at every wavelength (overrides '
+       'the formula of scene.medium: no dispersion); 0 = from scene.medium. Below 1 is refused.',
+       0.0, 4.0),
+    ParamSpec('port.type', 'string', 'none', '',
+              'Window in front of the lens: none, flat (a plane-parallel plate) or dome (a '
+              'concentric spherical shell); traced as two more surfaces, the scene in '
+              'scene.medium. Not with a datasheet lens (no surfaces to trace).',
+              choices=PORT_TYPES),
+    _d('port.thickness_mm', 5.0, 'mm', 'Thickness of the port (flat or dome); > 0.',
+       0.0, 1.0e3),
+    ParamSpec('port.glass', 'string', '', '',
+              'Material of the port by name: a catalog glass (N-BK7), PMMA (acrylic) or '
+              "POLYCARBONATE (Sultanova et al. 2009), its index at each wavelength; '' = "
+              'port.refractive_index.'),
+    _d('port.refractive_index', 1.4906, '1',
+       'Index of the port when port.glass is empty (PMMA at the d line).', 1.0, 4.0),
+    _d('port.distance_mm', 10.0, 'mm',
+       'Flat port: from the first lens vertex along the axis toward the scene to the inner face '
+       'of the port; > 0.', 0.0, 1.0e4),
+    _d('port.tilt_x_deg', 0.0, 'deg',
+       'Flat port: its plane turned about the row (x) line through the point where the axis '
+       'meets its inner face; > 0 brings the part seen at larger v (image rows further down) '
+       'closer to the lens. Applied first.', -45.0, 45.0),
+    _d('port.tilt_y_deg', 0.0, 'deg',
+       'Flat port: then turned about its column (y) line; > 0 brings the part seen at larger '
+       'u (further right) closer to the lens.', -45.0, 45.0),
+    _d('port.radius_mm', 50.0, 'mm', 'Dome port: radius of its inner surface; > 0.',
+       0.0, 1.0e4),
+    _d('port.center_offset_mm', 0.0, 'mm',
+       'Dome port: its centre along the axis from the paraxial entrance pupil of the lens (in '
+       'air), > 0 toward the scene; 0 = centred on the pupil (nearly central).',
+       -1.0e4, 1.0e4),
+    _d('port.decenter_x_mm', 0.0, 'mm',
+       'Dome port: its centre off the axis along the image rows (toward larger u).',
+       -1.0e3, 1.0e3),
+    _d('port.decenter_y_mm', 0.0, 'mm',
+       'Dome port: its centre off the axis along the image columns (toward larger v).',
+       -1.0e3, 1.0e3),
+)
 
 
 #: Largest output (and input) frame the node accepts, in pixels: 8192 x 8192. The maps cost
@@ -276,6 +333,8 @@ SCHEMA: tuple[ParamSpec, ...] = (
     _d('scene.circle_of_confusion_mm', 0.0, 'mm',
        'Acceptable circle of confusion c (eq. 22); 0 = the paper default, 0.1 % of f.',
        0.0, 10.0),
+    # --- underwater: the scene's medium and the port (issue 27; docs/underwater.md) ---
+    *UNDERWATER_SPECS,
     # --- output ---
     _d('output.alpha', 0.0, '1',
        'Scale of the corrected image as in getOptimalNewCameraMatrix: 0 keeps only valid pixels '

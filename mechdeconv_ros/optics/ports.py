@@ -1,0 +1,275 @@
+# Copyright 2026 The mechdeconv_ros Authors.
+# SPDX-License-Identifier: Apache-2.0
+"""
+Underwater ports: a flat or dome window in front of a lens, the scene in water.
+
+Pure numpy, no ROS. Frames and signs as :mod:`mechdeconv_ros.optics.prescription`: mm, the
+lens's first vertex at z = 0, light travelling +z, x and y the camera's optical frame (REP-103:
+x right, y down; an image pixel further right / down sees a scene point at larger x / y).
+
+Geometry (docs/underwater.md)
+-----------------------------
+Flat port: a plate of thickness t whose inner face meets the axis at z_i = -d (d =
+``port.distance_mm``) and whose outer face is parallel to it, t further toward the scene. Its
+plane is turned about the point (0, 0, -d): first by tilt_x about the x axis, then by tilt_y
+about the (fixed) y axis, so its normal toward the lens is n = R_y(b) R_x(a) e_z with
+
+    R_x(a) e_y = (0, cos a, sin a),   R_y(b) e_x = (cos b, 0, sin b):
+
+a positive tilt_x brings the part of the port at y > 0 (seen at larger v) closer to the lens,
+a positive tilt_y the part at x > 0 (larger u).
+
+Dome port: two concentric spheres, inner radius R, outer R + t, centred at
+C = (dx, dy, z_E + c) with z_E the lens's paraxial entrance pupil (in air) and c
+``port.center_offset_mm`` (> 0 toward the scene: z_C = z_E - c). Its inner vertex lies at
+z_C - R.
+
+Untilted and undecentred, a port keeps the rotational symmetry: it is two more surfaces in
+front of the lens (:func:`ported_prescription`), object space in the medium of index n_w, and
+the meridional tracer finds its chief rays. Otherwise :func:`trace_scene_points` traces skew
+rays in 3-D: the scene point P, in the medium, sends the ray P + s k (k unit) through the port
+(vector Snell at each face, :func:`mechdeconv_ros.optics.surfaces.refract`) and the lens
+(:mod:`mechdeconv_ros.optics.trace3d`); the chief ray is the one crossing the stop plane at
+its centre, found by a 2-D Newton on the direction's (k_x / k_z, k_y / k_z) with a
+finite-difference Jacobian, started from the symmetric port's chief ray (or the line toward
+the stop centre) and converged to 1e-10 mm at the stop.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+import math
+
+from mechdeconv_ros.optics.prescription import (
+    paraxial_matrix, Prescription, Surface, surfaces_before)
+from mechdeconv_ros.optics.surfaces import refract
+from mechdeconv_ros.optics.trace3d import lens_system, System, trace_pass
+import numpy as np
+
+#: The 2-D Newton of the chief ray stops when the stop is met within this (mm).
+STOP_TOLERANCE_MM = 1e-10
+#: Newton iterations of the chief-ray aiming in 3-D.
+MAX_ITERATIONS = 30
+
+_ERRSTATE = {'invalid': 'ignore', 'divide': 'ignore', 'over': 'ignore'}
+
+
+@dataclass(frozen=True)
+class Port:
+    """
+    A port: ``kind`` ``flat`` or ``dome``, its thickness and index, and its placement.
+
+    Flat: ``distance_mm`` (lens vertex to inner face), ``tilt_x_rad``/``tilt_y_rad``. Dome:
+    ``radius_mm`` (inner), ``center_z_mm`` (lens frame) and ``decenter_x_mm``/``_y_mm``.
+    """
+
+    kind: str
+    thickness_mm: float
+    index: float
+    distance_mm: float = 0.0
+    tilt_x_rad: float = 0.0
+    tilt_y_rad: float = 0.0
+    radius_mm: float = 0.0
+    center_z_mm: float = 0.0
+    decenter_x_mm: float = 0.0
+    decenter_y_mm: float = 0.0
+
+    @property
+    def symmetric(self) -> bool:
+        """Return True when the port keeps the lens's rotational symmetry."""
+        return (self.tilt_x_rad == 0.0 and self.tilt_y_rad == 0.0
+                and self.decenter_x_mm == 0.0 and self.decenter_y_mm == 0.0)
+
+    @property
+    def inner_vertex_z_mm(self) -> float:
+        """Return z where the axis meets the inner face (untilted, undecentred)."""
+        if self.kind == 'flat':
+            return -self.distance_mm
+        return self.center_z_mm - self.radius_mm
+
+    @property
+    def shift_mm(self) -> float:
+        """Return how far the lens's first vertex lies behind the port's outer vertex."""
+        return self.thickness_mm - self.inner_vertex_z_mm
+
+    def normal(self) -> np.ndarray:
+        """Return the flat port's unit normal toward the lens (module docstring)."""
+        a, b = self.tilt_x_rad, self.tilt_y_rad
+        n = np.array([0.0, -math.sin(a), math.cos(a)])
+        return np.array([n[0] * math.cos(b) - n[2] * math.sin(b), n[1],
+                         n[0] * math.sin(b) + n[2] * math.cos(b)])
+
+
+def entrance_pupil_z(lens: Prescription) -> float:
+    """
+    Return z of a lens's paraxial entrance pupil (the stop imaged into object space).
+
+    :param lens: the lens (its object index is used).
+    :return: z (mm, lens frame); the stop itself when it lies in front of the lens.
+    """
+    count = surfaces_before(lens, lens.stop_z_mm)
+    if count == 0:
+        return float(lens.stop_z_mm)
+    a, b, _, _ = paraxial_matrix(lens, count, 0.0, lens.stop_z_mm)
+    # The ray (y, n u) at z = 0 meets the stop centre when a y + b n u = 0: it crosses the axis
+    # at z = -y / u = b n_0 / a.
+    return float(b * lens.object_index / a) if a != 0.0 else math.inf
+
+
+def ported_prescription(lens: Prescription, port: Port, medium_index: float) -> Prescription:
+    """
+    Return the port (untilted, centred) and the lens as one prescription, scene in the medium.
+
+    :param lens: the lens in air.
+    :param port: the port (its tilts and decentring are ignored here).
+    :param medium_index: n of the scene's medium.
+    :return: the prescription; its first vertex is the port's outer vertex, the lens's first
+        vertex at ``port.shift_mm``.
+    """
+    gap = -port.inner_vertex_z_mm
+    if port.kind == 'flat':
+        outer = Surface(0.0, port.thickness_mm, port.index)
+        inner = Surface(0.0, gap, 1.0)
+    else:
+        outer = Surface(port.radius_mm + port.thickness_mm, port.thickness_mm, port.index)
+        inner = Surface(port.radius_mm, gap, 1.0)
+    return replace(lens, surfaces=(outer, inner) + tuple(lens.surfaces),
+                   stop_z_mm=lens.stop_z_mm + port.shift_mm, object_index=float(medium_index))
+
+
+def _unit(kx: np.ndarray, ky: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return the unit direction of slopes (kx / kz, ky / kz), kz > 0."""
+    norm = np.sqrt(1.0 + kx * kx + ky * ky)
+    return kx / norm, ky / norm, 1.0 / norm
+
+
+def _through_port(port: Port, medium_index: float, p: tuple[np.ndarray, ...],
+                  k: tuple[np.ndarray, ...]) -> tuple[tuple[np.ndarray, ...],
+                                                      tuple[np.ndarray, ...]]:
+    """Refract rays from the medium through both faces of the port into air (NaN: failed)."""
+    x, y, z = p
+    kx, ky, kz = k
+    indices = ((medium_index, port.index), (port.index, 1.0))
+    with np.errstate(**_ERRSTATE):
+        if port.kind == 'flat':
+            n = port.normal()
+            anchor = np.array([0.0, 0.0, -port.distance_mm])
+            for offset, (n0, n1) in zip((port.thickness_mm, 0.0), indices):
+                q = anchor - offset * n
+                s = ((q[0] - x) * n[0] + (q[1] - y) * n[1] + (q[2] - z) * n[2]) / (
+                    kx * n[0] + ky * n[1] + kz * n[2])
+                x, y, z = x + s * kx, y + s * ky, z + s * kz
+                kx, ky, kz = refract(kx, ky, kz, n[0], n[1], n[2], n0, n1)
+            return (x, y, z), (kx, ky, kz)
+        c = (port.decenter_x_mm, port.decenter_y_mm, port.center_z_mm)
+        for radius, (n0, n1) in zip((port.radius_mm + port.thickness_mm, port.radius_mm),
+                                    indices):
+            dx, dy, dz = x - c[0], y - c[1], z - c[2]
+            b = dx * kx + dy * ky + dz * kz
+            cc = dx * dx + dy * dy + dz * dz - radius * radius
+            # The near intersection from outside the sphere (the ray enters it).
+            s = -b - np.sqrt(b * b - cc)
+            x, y, z = x + s * kx, y + s * ky, z + s * kz
+            nx, ny, nz = (c[0] - x) / radius, (c[1] - y) / radius, (c[2] - z) / radius
+            kx, ky, kz = refract(kx, ky, kz, nx, ny, nz, n0, n1)
+        return (x, y, z), (kx, ky, kz)
+
+
+def trace_scene_points(lens: Prescription, port: Port, medium_index: float,
+                       points: np.ndarray, sensor_z_mm: float,
+                       start: np.ndarray | None = None, *,
+                       with_slopes: bool = False) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+    """
+    Return where the chief rays of scene points cross the sensor plane (exact, 3-D).
+
+    :param lens: the lens in air (its frame: first vertex at z = 0).
+    :param port: the port (tilted, decentred or not).
+    :param medium_index: n of the scene's medium.
+    :param points: ``(N, 3)`` scene points x, y, z (lens frame, z < the port).
+    :param sensor_z_mm: z of the sensor plane (lens frame).
+    :param start: ``(N, 2)`` starting slopes (k_x / k_z, k_y / k_z) of the aiming; default
+        the line toward the paraxial entrance pupil.
+    :param with_slopes: also return the chief rays' slopes in the medium.
+    :return: ``(N, 2)`` physical x, y on the sensor (mm; inverted image), NaN where no chief
+        ray passes; with ``with_slopes``, also the ``(N, 2)`` slopes (k_x / k_z, k_y / k_z).
+    """
+    pts = np.asarray(points, dtype=float).reshape(-1, 3)
+    system = lens_system(lens, 0.0, stop_surface=None)
+    z_stop = float(lens.stop_z_mm)
+
+    if start is None:
+        z_e = entrance_pupil_z(lens)
+        with np.errstate(**_ERRSTATE):
+            slopes = np.stack([-pts[:, 0] / (z_e - pts[:, 2]), -pts[:, 1] / (z_e - pts[:, 2])],
+                              axis=1)
+    else:
+        slopes = np.array(start, dtype=float).reshape(-1, 2)
+    stop_system = _prefix(system, z_stop)
+    value = _stop_xy(port, medium_index, pts, slopes, stop_system)
+    eps = 1e-7
+    active = np.isfinite(value).all(axis=1)
+    for _ in range(MAX_ITERATIONS):
+        err = np.hypot(value[:, 0], value[:, 1])
+        todo = np.flatnonzero(active & (err > STOP_TOLERANCE_MM))
+        if todo.size == 0:
+            break
+        s0 = slopes[todo]
+        fx = _stop_xy(port, medium_index, pts[todo], s0 + [eps, 0.0], stop_system)
+        fy = _stop_xy(port, medium_index, pts[todo], s0 + [0.0, eps], stop_system)
+        j = np.stack([(fx - value[todo]) / eps, (fy - value[todo]) / eps], axis=2)
+        with np.errstate(**_ERRSTATE):
+            det = j[:, 0, 0] * j[:, 1, 1] - j[:, 0, 1] * j[:, 1, 0]
+            vx, vy = value[todo, 0], value[todo, 1]
+            step = np.stack([(j[:, 1, 1] * vx - j[:, 0, 1] * vy) / det,
+                             (-j[:, 1, 0] * vx + j[:, 0, 0] * vy) / det], axis=1)
+        lam = np.ones(todo.size)
+        pending = np.arange(todo.size)
+        for _ in range(12):
+            trial = s0[pending] - lam[pending, None] * step[pending]
+            new = _stop_xy(port, medium_index, pts[todo[pending]], trial, stop_system)
+            good = np.isfinite(new).all(axis=1) & (
+                np.hypot(new[:, 0], new[:, 1]) < err[todo[pending]])
+            slopes[todo[pending[good]]] = trial[good]
+            value[todo[pending[good]]] = new[good]
+            lam[pending[~good]] *= 0.5
+            pending = pending[~good]
+            if pending.size == 0:
+                break
+        active[todo[pending]] = False
+    err = np.hypot(value[:, 0], value[:, 1])
+    ok = active & (err <= 1e3 * STOP_TOLERANCE_MM)
+    kx, ky, kz = _unit(slopes[:, 0], slopes[:, 1])
+    p, k = _through_port(port, medium_index, (pts[:, 0], pts[:, 1], pts[:, 2]), (kx, ky, kz))
+    passed, (x, y, z, kx, ky, kz) = trace_pass(system, *p, *k)
+    with np.errstate(**_ERRSTATE):
+        s = (sensor_z_mm - z) / kz
+        out = np.stack([x + s * kx, y + s * ky], axis=1)
+    out[~(ok & passed & (kz > 0))] = np.nan
+    return (out, slopes) if with_slopes else out
+
+
+def _prefix(system: System, z_stop: float) -> System:
+    """Return the elements up to and including the stop plane (the aiming's system)."""
+    elements = []
+    for e in system.elements:
+        elements.append(e)
+        if e.is_stop:
+            break
+    return System(tuple(elements))
+
+
+def _stop_xy(port: Port, medium_index: float, pts: np.ndarray, slopes: np.ndarray,
+             stop_system: System) -> np.ndarray:
+    """Return (x, y) where the rays of ``slopes`` cross the stop plane (NaN: failed)."""
+    kx, ky, kz = _unit(slopes[:, 0], slopes[:, 1])
+    p, k = _through_port(port, medium_index, (pts[:, 0], pts[:, 1], pts[:, 2]), (kx, ky, kz))
+    stop = stop_system.elements[-1]
+    if len(stop_system.elements) > 1:
+        passed, (x, y, z, kx, ky, kz) = trace_pass(System(stop_system.elements[:-1]), *p, *k)
+    else:
+        passed, (x, y, z), (kx, ky, kz) = np.isfinite(p[0]), p, k
+    with np.errstate(**_ERRSTATE):
+        s = (stop.z_mm - z) / kz
+        out = np.stack([x + s * kx, y + s * ky], axis=1)
+    out[~(passed & np.isfinite(out).all(axis=1))] = np.nan
+    return out
