@@ -49,9 +49,10 @@ import time
 from typing import Any, Mapping
 
 from benchmarks.common import bench_main, log, RESULTS
+from benchmarks.metrics import radii_mean_error_percent
 from benchmarks.report import (
     accuracy_grid_figure, accuracy_plots, accuracy_tables, machine_info, write_json)
-from mechdeconv_ros.model.model import build_model, LensModel, radii_mean_error_percent
+from mechdeconv_ros.model.model import build_model, LensModel
 from mechdeconv_ros.schema.params import load_params_file
 import numpy as np
 import numpy.typing as npt

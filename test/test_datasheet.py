@@ -15,7 +15,8 @@ import math
 
 from mechdeconv_ros.imaging.remap import Rectifier
 from mechdeconv_ros.lenses import datasheet as ds
-from mechdeconv_ros.model.model import build_model, camera_info_yaml, ModelError
+from mechdeconv_ros.model.camera_yaml import camera_info_yaml
+from mechdeconv_ros.model.model import build_model, ModelError
 from mechdeconv_ros.schema.params import load_params_file
 from mechdeconv_ros.tools.cli import format_report
 from mechdeconv_ros.tools.plots import plot_model

@@ -1,7 +1,7 @@
 # Copyright 2026 The mechdeconv_ros Authors.
 # SPDX-License-Identifier: Apache-2.0
 """
-The layout: layers, no import circles, no module over 800 lines, docs/design.md section 6 true.
+The layout: layers, no import circles, no module over 800 lines nor function over 80, section 6.
 
 The package is split into subpackages that are layers (:data:`LAYERS`, bottom first): a module
 imports only modules of its own subpackage and of the subpackages below it.
@@ -22,6 +22,8 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 PACKAGES = ('mechdeconv_ros', 'benchmarks')
 MAX_LINES = 800
+#: One job per function: none of the package's functions is longer (def to last line).
+MAX_FUNCTION_LINES = 80
 #: The subpackages of mechdeconv_ros, bottom layer first.
 LAYERS = ('schema', 'optics', 'lenses', 'model', 'imaging', 'node', 'tools')
 #: Circles that exist and are being removed elsewhere (none: the benchmarks' circle
@@ -168,6 +170,30 @@ def test_no_package_module_over_800_lines(name):
     """One job per module: none of the package's modules is longer than 800 lines."""
     lines = len(modules()[name].read_text().splitlines())
     assert lines <= MAX_LINES, f'{name} has {lines} lines'
+
+
+def long_functions(source: str, limit: int = MAX_FUNCTION_LINES) -> list[tuple[str, int]]:
+    """Return ``(name, lines)`` of the functions (and methods) of a source longer than limit."""
+    return [(node.name, node.end_lineno - node.lineno + 1)
+            for node in ast.walk(ast.parse(source))
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
+            and node.end_lineno - node.lineno + 1 > limit]
+
+
+def test_the_function_length_rule_finds_a_long_function():
+    """The rule is not vacuous: a function of limit + 1 lines is found, one of limit is not."""
+    body = ''.join(f'    x{i} = {i}\n' for i in range(MAX_FUNCTION_LINES - 1))
+    short_one = f'def fits():\n{body}'
+    long_one = f'def too_long():\n{body}    return 0\n'
+    assert long_functions(short_one) == []
+    assert long_functions(long_one) == [('too_long', MAX_FUNCTION_LINES + 1)]
+
+
+@pytest.mark.parametrize('name', sorted(n for n in modules() if n.startswith('mechdeconv_ros')))
+def test_no_package_function_over_80_lines(name):
+    """One job per function: none is longer than 80 lines (split it into named steps)."""
+    found = long_functions(modules()[name].read_text())
+    assert not found, f'{name}: functions over {MAX_FUNCTION_LINES} lines: {found}'
 
 
 def layout_table() -> dict[str, str]:

@@ -6,10 +6,11 @@ from __future__ import annotations
 
 import math
 
+from benchmarks.metrics import radii_mean_error_percent
 import cv2
 from mechdeconv_ros.imaging.remap import build_float_maps, Rectifier
-from mechdeconv_ros.model.model import (
-    build_model, camera_info_yaml, ModelError, radii_mean_error_percent)
+from mechdeconv_ros.model.camera_yaml import camera_info_yaml
+from mechdeconv_ros.model.model import build_model, ModelError
 from mechdeconv_ros.optics.raytrace import image_plane, trace_chief_rays
 from mechdeconv_ros.optics.thick_lens import thick_lens_focal_length
 import numpy as np

@@ -20,7 +20,8 @@ import math
 
 from hypothesis import given, HealthCheck, settings, strategies as st
 from mechdeconv_ros.imaging.remap import build_float_maps, Rectifier
-from mechdeconv_ros.model.model import build_model, camera_info_yaml, ModelError
+from mechdeconv_ros.model.camera_yaml import camera_info_yaml
+from mechdeconv_ros.model.model import build_model, ModelError
 from mechdeconv_ros.schema.params import SPECS
 import numpy as np
 import pytest

@@ -16,19 +16,22 @@ The rules, their formulas and limits are listed in docs/design.md section 7. Two
   ``t - sag1(a) + sag2(a) >= 0``, and the warnings for a far stop and f/0.7 or faster.
 
 The sagitta of a surface at height a is ``c a^2 / (1 + sqrt(1 - (1 + k) c^2 a^2))`` plus the
-even asphere terms (:func:`mechdeconv_ros.optics.surfaces.sag_at_height`); a paraxial ray is
-transferred by ``y += d (n u) / n`` and refracted by ``n u -= (n' - n) c y``
-(:func:`_paraxial_height`).
+even asphere terms (:func:`mechdeconv_ros.optics.surfaces.sag_at_height`); the paraxial rays
+(beam heights, the marginal ray, the entrance pupil, the glass elements) are
+:mod:`mechdeconv_ros.optics.paraxial_rays`.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 import math
 from typing import Any, Mapping
 
 from mechdeconv_ros.lenses.lens_errors import (
     FloatArray, is_prescription_mode, ModelError, scene_distance, stop_param)
 from mechdeconv_ros.optics import scene_constraints
+from mechdeconv_ros.optics.paraxial_rays import (
+    entrance_pupil_scale, glass_elements, marginal_ray, paraxial_height)
 from mechdeconv_ros.optics.prescription import Prescription, Surface, vertex_z
 from mechdeconv_ros.optics.surfaces import domain_limit_mm, is_spherical, sag_at_height
 
@@ -49,52 +52,6 @@ def _shape(surface: Surface) -> str:
            f'{surface.radius_mm:g} mm'
 
 
-def _paraxial_height(prescription: Prescription, h: float, u: float, z_end: float) -> float:
-    """
-    Return the height at the plane ``z_end`` of a paraxial ray.
-
-    The ray has height ``h`` at the first-vertex plane z = 0 and slope ``u`` in object space
-    (a line there, so ``z_end < 0`` is on it); transfers are ``y += d (n u) / n`` and
-    refractions ``n u -= (n' - n) c y`` at every vertex before ``z_end``.
-    """
-    index = prescription.object_index
-    y, nu, z = h, index * u, 0.0
-    if z_end <= 0.0:
-        return h + u * z_end
-    for z_vertex, surface, before in zip(vertex_z(prescription), prescription.surfaces,
-                                         range(len(prescription.surfaces))):
-        if z_vertex > z_end:
-            break
-        y += (float(z_vertex) - z) * nu / index
-        nu -= (surface.refractive_index - prescription.index_before(before)) \
-            * surface.curvature_per_mm * y
-        z, index = float(z_vertex), surface.refractive_index
-    return y + (z_end - z) * nu / index
-
-
-def _marginal_ray(prescription: Prescription, distance: float, front_principal_z: float
-                  ) -> tuple[float, float]:
-    """
-    Return the axial marginal ray ``(h, u)`` through the rim of a stop of unit radius.
-
-    ``lens.aperture_diameter_mm`` is the physical diameter of the stop (at
-    ``lens.stop_surface`` in prescription mode), not its image in object space: the ray leaves
-    the axial scene point (or comes parallel from infinity) and crosses the stop plane at
-    height 1. The vignetting trace clips at the same stop.
-
-    :return: height at z = 0 and object-space slope (``u`` is inf when the stop sits at an
-        image of the scene, where the axial beam has no height).
-    """
-    z_stop = prescription.stop_z_mm
-    if math.isinf(distance):
-        at_stop = _paraxial_height(prescription, 1.0, 0.0, z_stop)
-        return (1.0 / at_stop if at_stop != 0.0 else math.inf), 0.0
-    z_scene = front_principal_z - distance
-    at_stop = _paraxial_height(prescription, -z_scene, 1.0, z_stop)
-    u = 1.0 / at_stop if at_stop != 0.0 else math.inf
-    return -z_scene * u, u
-
-
 def pupil_scale(values: Mapping[str, Any], prescription: Prescription) -> float:
     """
     Return entrance pupil diameter / ``lens.aperture_diameter_mm`` (the f-number's aperture).
@@ -113,28 +70,7 @@ def pupil_scale(values: Mapping[str, Any], prescription: Prescription) -> float:
     """
     if not is_prescription_mode(values):
         return 1.0
-    a = abs(_paraxial_height(prescription, 1.0, 0.0, prescription.stop_z_mm))
-    return 1.0 / a if a > 0.0 and math.isfinite(a) else 1.0
-
-
-def _elements(prescription: Prescription) -> list[list[int]]:
-    """
-    Return the glass elements: runs of surfaces joined by glass (index > 1 between them).
-
-    Surfaces with the same index on both sides refract nothing (dummy planes, such as a stop
-    inside the glass) and are left out.
-    """
-    out: list[list[int]] = []
-    current: list[int] = []
-    for i, surface in enumerate(prescription.surfaces):
-        if surface.refractive_index == prescription.index_before(i):
-            continue
-        current.append(i)
-        if surface.refractive_index == 1.0:
-            if len(current) > 1:
-                out.append(current)
-            current = []
-    return out
+    return entrance_pupil_scale(prescription)
 
 
 def _edge_crossing(surfaces: tuple[Surface, ...], z_vertices: FloatArray, element: list[int],
@@ -190,6 +126,9 @@ def check_surfaces(vals: Mapping[str, Any], prescription: Prescription, para: An
     Refuse surfaces that cannot exist; return warnings for an unusual lens.
 
     The rules, each with its parameter, formula and limit, are listed in docs/design.md section 7.
+    They run in this order, the first that fails refuses: the image plane behind the last
+    surface, the stop between scene and image plane, semi-diameters within their surfaces,
+    an axial beam that can be traced, an aperture the surfaces pass, edge thicknesses.
 
     :param vals: checked parameter values.
     :param prescription: the lens of those values.
@@ -199,21 +138,48 @@ def check_surfaces(vals: Mapping[str, Any], prescription: Prescription, para: An
     :raises ModelError: naming the parameter, why, and the limit.
     :return: warnings about physically possible but unusual values.
     """
-    f = para.efl_mm
-    prescription_mode = is_prescription_mode(vals)
-    warnings: list[str] = []
-    # The image plane (the sensor) must lie behind the last surface, in air.
+    _check_image_plane(vals, para, sensor_z)
+    stop = _check_stop(vals, prescription, para, distance, sensor_z)
+    _check_semi_diameters(prescription)
+    d_a = float(vals['lens.aperture_diameter_mm'])
+    heights = _beam_heights(prescription, para, distance, stop)
+    elements = glass_elements(prescription)
+    _check_aperture(prescription, heights, elements, d_a, stop)
+    _check_edges(vals, prescription, heights, elements, d_a)
+    return _unusual(vals, prescription, para, d_a, stop)
+
+
+def _thickness_name(vals: Mapping[str, Any]) -> str:
+    return 'lens.surfaces.thickness_mm' if is_prescription_mode(vals) else 'lens.thickness_mm'
+
+
+def _check_image_plane(vals: Mapping[str, Any], para: Any, sensor_z: float) -> None:
+    """Refuse an image plane (the sensor) that is not behind the last surface, in air."""
     z_last = para.last_vertex_z_mm
     if sensor_z <= z_last:
-        name = 'lens.surfaces.thickness_mm' if prescription_mode else 'lens.thickness_mm'
-        raise ModelError(name, f'the image plane falls at z = {sensor_z:.4g} mm, not behind '
-                               f'the last surface at z = {z_last:.4g} mm: the sensor would '
-                               'have to sit inside the lens (the back focal distance must be '
-                               'positive)')
-    # The stop: between the scene and the image plane.
+        raise ModelError(_thickness_name(vals),
+                         f'the image plane falls at z = {sensor_z:.4g} mm, not behind '
+                         f'the last surface at z = {z_last:.4g} mm: the sensor would '
+                         'have to sit inside the lens (the back focal distance must be '
+                         'positive)')
+
+
+@dataclass(frozen=True)
+class _Stop:
+    """The stop as the reasons name it: its parameter and value, its z, where it is."""
+
+    name: str
+    value: Any
+    z_mm: float
+    where: str
+
+
+def _check_stop(vals: Mapping[str, Any], prescription: Prescription, para: Any,
+                distance: float, sensor_z: float) -> _Stop:
+    """Refuse a stop that is not between the scene and the image plane; return the stop."""
+    prescription_mode = is_prescription_mode(vals)
     z_stop = prescription.stop_z_mm
     stop_name = stop_param(vals)
-    stop_value = vals[stop_name]
     if prescription_mode:
         where = f'surface {int(vals["lens.stop_surface"])} at z = {z_stop:.4g} mm'
     else:
@@ -231,9 +197,12 @@ def check_surfaces(vals: Mapping[str, Any], prescription: Prescription, para: An
         raise ModelError(stop_name, f'{where}, at or in front of the scene at z = '
                                     f'{z_scene:.4g} mm: the aperture must lie between the '
                                     f'scene and the lens{limit}')
-    # Clear apertures: a sphere is at most 2|r| wide; a given semi-diameter bounds its surface.
-    surfaces = prescription.surfaces
-    for i, surface in enumerate(surfaces):
+    return _Stop(stop_name, vals[stop_name], z_stop, where)
+
+
+def _check_semi_diameters(prescription: Prescription) -> None:
+    """Clear apertures: a sphere is at most 2|r| wide; a conic's rim bounds it likewise."""
+    for i, surface in enumerate(prescription.surfaces):
         semi, rim = surface.semi_diameter_mm, domain_limit_mm(surface)
         if semi > rim * (1.0 + LIMIT_SLACK):
             raise ModelError('lens.surfaces.semi_diameter_mm',
@@ -241,23 +210,31 @@ def check_surfaces(vals: Mapping[str, Any], prescription: Prescription, para: An
                              f'{_shape(surface)} can be (at most '
                              + (f'|r| = {rim:.6g} mm, a hemisphere)' if is_spherical(surface)
                                 else f'{rim:.6g} mm, its rim)'))
-    d_a = float(vals['lens.aperture_diameter_mm'])
-    h, u = _marginal_ray(prescription, distance, para.front_principal_z_mm)
+
+
+def _beam_heights(prescription: Prescription, para: Any, distance: float,
+                  stop: _Stop) -> list[float]:
+    """Return the axial beam's height at every vertex per unit aperture radius (d_a / 2 = 1)."""
+    h, u = marginal_ray(prescription, distance, para.front_principal_z_mm)
     if not (math.isfinite(h) and math.isfinite(u)):
-        raise ModelError(stop_name, f'{where} sits at an image of the scene (the axial beam '
-                                    'focuses there): it would bound the field, not the '
+        raise ModelError(stop.name, f'{stop.where} sits at an image of the scene (the axial '
+                                    'beam focuses there): it would bound the field, not the '
                                     'aperture')
-    z_vertices = vertex_z(prescription)
-    # Beam heights per unit aperture radius (d_a / 2 = 1).
-    heights = [abs(_paraxial_height(prescription, h, u, float(z))) for z in z_vertices]
+    heights = [abs(paraxial_height(prescription, h, u, float(z)))
+               for z in vertex_z(prescription)]
     if not all(math.isfinite(y) for y in heights):
-        raise ModelError(stop_name, f'{where}: the axial beam through it cannot be traced '
+        raise ModelError(stop.name, f'{stop.where}: the axial beam through it cannot be traced '
                                     '(the paraxial marginal ray overflows): the stop is at or '
                                     'next to an image of the scene')
-    elements = _elements(prescription)
+    return heights
+
+
+def _check_aperture(prescription: Prescription, heights: list[float],
+                    elements: list[list[int]], d_a: float, stop: _Stop) -> None:
+    """Refuse a stop whose axial beam does not pass every rim and given semi-diameter."""
     real = {i for element in elements for i in element}
     bound, culprit, at = math.inf, '', 0
-    for i, surface in enumerate(surfaces):
+    for i, surface in enumerate(prescription.surfaces):
         semi, rim = surface.semi_diameter_mm, domain_limit_mm(surface)
         if heights[i] <= 0.0:
             continue
@@ -274,11 +251,16 @@ def check_surfaces(vals: Mapping[str, Any], prescription: Prescription, para: An
         raise ModelError('lens.aperture_diameter_mm',
                          f'{d_a:g} mm (stop diameter) is wider than the surfaces allow: its '
                          f'axial beam is {d_a * heights[at]:.4g} mm wide at surface {at}, '
-                         f'wider than {culprit}; with the stop where {stop_name} = '
-                         f'{stop_value:g} puts it (z = {z_stop:.4g} mm) the largest aperture is '
-                         f'{2.0 * bound:.4g} mm (paraxial marginal ray)')
-    # Edge thickness of every glass element at its clear semi-aperture.
-    thickness_name = 'lens.surfaces.thickness_mm' if prescription_mode else 'lens.thickness_mm'
+                         f'wider than {culprit}; with the stop where {stop.name} = '
+                         f'{stop.value:g} puts it (z = {stop.z_mm:.4g} mm) the largest aperture '
+                         f'is {2.0 * bound:.4g} mm (paraxial marginal ray)')
+
+
+def _check_edges(vals: Mapping[str, Any], prescription: Prescription, heights: list[float],
+                 elements: list[list[int]], d_a: float) -> None:
+    """Edge thickness of every glass element at its clear semi-aperture: no crossing surfaces."""
+    surfaces = prescription.surfaces
+    z_vertices = vertex_z(prescription)
     for element in elements:
         crossing = _edge_crossing(surfaces, z_vertices, element, heights, d_a)
         if crossing is None:
@@ -295,14 +277,21 @@ def check_surfaces(vals: Mapping[str, Any], prescription: Prescription, para: An
                                                      mid) else (mid, hi)
             smaller = f'lens.aperture_diameter_mm at most {lo:.4g} mm'
         which = (f'the glass between surfaces {i} and {j} ({centre:g} mm thick at the '
-                 'centre)' if prescription_mode else f'the lens ({centre:g} mm thick at the '
-                 'centre)')
-        raise ModelError(thickness_name,
+                 'centre)' if is_prescription_mode(vals) else f'the lens ({centre:g} mm thick '
+                 'at the centre)')
+        raise ModelError(_thickness_name(vals),
                          f'{which} has an edge thickness of {edge:.4g} mm at its '
                          f'{semi_aperture:.4g} mm clear semi-aperture: its surfaces cross '
                          f'(t - sag1(a) + sag2(a) < 0). It must be at least '
                          f'{centre - edge:.4g} mm thick at the centre, or {smaller}')
-    # Unusual but possible: a stop far outside the lens, a very fast aperture.
+
+
+def _unusual(vals: Mapping[str, Any], prescription: Prescription, para: Any, d_a: float,
+             stop: _Stop) -> list[str]:
+    """Return the warnings: a stop far outside the lens, a very fast aperture."""
+    f = para.efl_mm
+    z_stop, z_last, stop_name = stop.z_mm, para.last_vertex_z_mm, stop.name
+    warnings: list[str] = []
     outside = max(-z_stop, z_stop - z_last, 0.0)
     if outside > FAR_STOP_FOCAL_LENGTHS * f:
         side = 'in front of the first' if z_stop < 0.0 else 'behind the last'

@@ -41,7 +41,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 import math
 import time
-from typing import Any, Mapping
+from typing import Any, Mapping, Protocol, TypeVar
 
 from mechdeconv_ros.lenses.lens_errors import is_prescription_mode
 from mechdeconv_ros.lenses.lens_source import FloatArray, ModelError, Prescription, TracedSource
@@ -50,8 +50,59 @@ from mechdeconv_ros.optics.glass import GlassError, lookup
 from mechdeconv_ros.optics.raytrace import trace_field
 import numpy as np
 
-#: A :class:`mechdeconv_ros.model.model.LensModel` (not imported: the model imports this module).
-LensModel = Any
+
+class ModelView(Protocol):
+    """
+    What this module reads of a model: a :class:`mechdeconv_ros.model.model.LensModel`.
+
+    The model imports this module (its ``lateral_color()`` traces the channels), so the
+    dependency runs model -> lateral_color and this module names the attributes it uses
+    instead of importing the class.
+    """
+
+    @property
+    def values(self) -> Mapping[str, Any]:  # noqa: D102 - a protocol member
+        ...
+
+    @property
+    def source(self) -> Any:  # noqa: D102 - a protocol member
+        ...
+
+    @property
+    def width(self) -> int:  # noqa: D102 - a protocol member
+        ...
+
+    @property
+    def height(self) -> int:  # noqa: D102 - a protocol member
+        ...
+
+    @property
+    def pixel_mm(self) -> tuple[float, float]:  # noqa: D102 - a protocol member
+        ...
+
+    @property
+    def image_distance_mm(self) -> float:  # noqa: D102 - a protocol member
+        ...
+
+    @property
+    def K(self) -> FloatArray:  # noqa: D102, N802 - a protocol member, the ROS name
+        ...
+
+    @property
+    def curve(self) -> RadialMap:  # noqa: D102 - a protocol member
+        ...
+
+    @property
+    def field_curve(self) -> RadialMap | None:  # noqa: D102 - a protocol member
+        ...
+
+    @property
+    def projection(self) -> str:  # noqa: D102 - a protocol member
+        ...
+
+
+#: A model of the kind given (``channel_model`` returns the same kind).
+M = TypeVar('M', bound=ModelView)
 
 #: The channels, in the order of ``lens.channel_wavelengths_nm``.
 CHANNELS = ('R', 'G', 'B')
@@ -226,7 +277,7 @@ class LateralColor:
     #: The wavelength the lens is focused at (the model's).
     focus_wavelength_nm: float
 
-    def report(self, model: LensModel) -> dict[str, Any]:
+    def report(self, model: ModelView) -> dict[str, Any]:
         """
         Return the JSON-ready report.
 
@@ -254,7 +305,7 @@ class LateralColor:
         }
 
 
-def channel_model(model: LensModel, channel: ChannelTrace) -> LensModel:
+def channel_model(model: M, channel: ChannelTrace) -> M:
     """
     Return the model with a channel's radial map in place of its own (same K, K_new, size).
 
@@ -281,7 +332,7 @@ def wavelengths(values: Mapping[str, Any]) -> tuple[float, float, float]:
     return given[0], given[1], given[2]
 
 
-def trace_channels(model: LensModel) -> LateralColor:
+def trace_channels(model: ModelView) -> LateralColor:
     """
     Trace the three channels of a model to its sensor plane.
 
@@ -325,7 +376,7 @@ def _distance(values: Mapping[str, Any]) -> float:
     return math.inf if distance == 0.0 else distance
 
 
-def _max_separation(model: LensModel, traces: list[ChannelTrace]
+def _max_separation(model: ModelView, traces: list[ChannelTrace]
                     ) -> tuple[float, tuple[float, float]]:
     """Return the largest |h_R - h_B| in raw px over the raw image, and where."""
     w, h = model.width, model.height

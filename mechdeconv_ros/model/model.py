@@ -66,13 +66,11 @@ from mechdeconv_ros.optics.illumination import Illumination
 from mechdeconv_ros.optics.prescription import Prescription
 from mechdeconv_ros.schema.params import check_values, INTERPOLATIONS, MAX_FRAME_PIXELS, ParamValue
 import numpy as np
-import yaml
 
 #: The names callers import from here (some live in the modules the model is made of).
 __all__ = [
-    'build_model', 'camera_info_yaml', 'CV_INTERPOLATION', 'EQUIVALENT_MAX_ERROR_PX',
-    'EquivalentFit', 'LensModel', 'make_prescription', 'ModelError', 'radii_mean_error_percent',
-    'RadialMap']
+    'build_model', 'CV_INTERPOLATION', 'EQUIVALENT_MAX_ERROR_PX', 'EquivalentFit', 'LensModel',
+    'make_prescription', 'ModelError', 'RadialMap']
 
 #: OpenCV interpolation flags by the names ``output.interpolation`` accepts.
 CV_INTERPOLATION = {'nearest': 0, 'linear': 1, 'cubic': 2, 'lanczos4': 4}
@@ -277,29 +275,6 @@ def _json_safe(value: Any) -> Any:
     return value
 
 
-def radii_mean_error_percent(estimated_px: FloatArray, true_px: FloatArray,
-                             center_px: tuple[float, float]) -> float:
-    """
-    Return the paper's radii mean error (eq. 35-37), in percent.
-
-    For each point the radius from the principal point of the estimated (corrected) position is
-    compared with that of the true position: ``e = mean(|r_est - r_true| / r_true) * 100``.
-    Points on the axis (``r_true = 0``) carry no radius and are skipped.
-
-    :param estimated_px: ``(N, 2)`` estimated positions.
-    :param true_px: ``(N, 2)`` true positions.
-    :param center_px: the principal point both radii are measured from.
-    :return: the mean relative radius error in percent; NaN if no point qualifies.
-    """
-    center = np.asarray(center_px, dtype=np.float64)
-    r_est = np.hypot(*(np.asarray(estimated_px, dtype=np.float64) - center).T)
-    r_true = np.hypot(*(np.asarray(true_px, dtype=np.float64) - center).T)
-    keep = r_true > 1e-9
-    if not np.any(keep):
-        return math.nan
-    return float(np.mean(np.abs(r_est[keep] - r_true[keep]) / r_true[keep]) * 100.0)
-
-
 def _image_size(values: Mapping[str, Any], width: int, height: int) -> tuple[int, int, int, int]:
     w = int(values['sensor.width_px']) or int(width)
     h = int(values['sensor.height_px']) or int(height)
@@ -350,11 +325,7 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
     :return: the model.
     :raises ModelError: naming the parameter at fault when the values describe no camera.
     """
-    try:
-        vals = check_values(values)
-    except ValueError as err:
-        name = str(err).split(':', 1)[0].split('[', 1)[0].strip(" '")
-        raise ModelError(name, str(err).split(':', 1)[-1].strip()) from None
+    vals = _checked(values)
     if source is None:
         source = source_for(vals)
     # The rules of every source (paraxial), then the ones on its surfaces (docs/design.md s. 7).
@@ -367,13 +338,60 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
     refusals.check_circle_of_confusion(vals, f, w * px, h * py)
     fx, fy = v / px, v / py
     K = np.array([[fx, 0.0, (w - 1) / 2.0], [0.0, fy, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
-
     projection = str(vals['output.projection'])
-    cap = field_cap_rad(distance)
+    coarse = _trace_field(source, distance, v, half_diagonal_mm(w, h, (px, py)))
+    outline = _raw_outline(coarse, K, w, h, (px, py), projection)
+    k = _scale_k(outline.ideal, outline.disk, ow / 2.0, oh / 2.0, fx, fy,
+                 float(vals['output.alpha']))
+    K_new = np.array([[k * fx, 0.0, (ow - 1) / 2.0], [0.0, k * fy, (oh - 1) / 2.0],
+                      [0.0, 0.0, 1.0]])
 
-    # Pass 1: trace the field by angle (theta uniform) far enough to cover the raw image (its
-    # edge, not the pixel centre), or to the end of the field the lens passes.
-    edge_real = half_diagonal_mm(w, h, (px, py))
+    # Pass 2: the dense curve in the output projection from 0 to just past the output corner
+    # (and the raw image edge).
+    out_corner = math.hypot(ow / 2.0 / (k * fx), oh / 2.0 / (k * fy)) * v
+    raw_corner_ideal = float(np.nanmax(outline.ratio * outline.real)) * v
+    reach = min(1.02 * max(out_corner, raw_corner_ideal), outline.disk * v * 1.001)
+    curve = resample(coarse, v, reach, CURVE_SAMPLES, projection)
+
+    fits = fit_equivalent(coarse, v, K, w, h)
+    chosen = choose_equivalent(fits)
+    disp = (outline.ideal * v - outline.points_mm) / np.array([px, py])
+    max_disp = float(np.nanmax(np.hypot(disp[:, 0], disp[:, 1])))
+
+    model = LensModel(
+        values=vals, source=source, width=w, height=h, out_width=ow,
+        out_height=oh, pixel_mm=(px, py), focal_length_mm=f, image_distance_mm=v, curve=curve,
+        K=K, K_new=K_new, D=chosen.D, distortion_model=chosen.distortion_model,
+        fit_rms_px=chosen.rms_error_px, equivalent_max_error_px=chosen.max_error_px,
+        equivalent_fits=tuple(fits),
+        max_displacement_px=max_disp,
+        interpolation=CV_INTERPOLATION[str(vals['output.interpolation'])],
+        projection=projection, field_curve=coarse, warnings=tuple(warnings))
+    if vals['output.lateral_color_correction']:
+        model.lateral_color()       # its three traces: a channel no ray passes is refused now
+    return model
+
+
+def _checked(values: Mapping[str, Any]) -> dict[str, ParamValue]:
+    """Return the checked values; a value the schema refuses becomes a ModelError naming it."""
+    try:
+        return check_values(values)
+    except ValueError as err:
+        name = str(err).split(':', 1)[0].split('[', 1)[0].strip(" '")
+        raise ModelError(name, str(err).split(':', 1)[-1].strip()) from None
+
+
+def _trace_field(source: LensSource, distance: float, v: float, edge_real: float) -> RadialMap:
+    """
+    Pass 1: trace the field by angle (theta uniform) far enough to cover the raw image.
+
+    That is to its edge (``edge_real``, not the pixel centre), or to the end of the field the
+    lens passes.
+
+    :raises ModelError: naming the lens when not even the axial ray passes, the stop when
+        the field is blocked close to the axis.
+    """
+    cap = field_cap_rad(distance)
     theta_max = min(cap, 1.5 * edge_real / v)
     for _ in range(12):
         coarse = trace_curve(source, distance, v, theta_max * v, COARSE_SAMPLES, 'equidistant')
@@ -391,6 +409,24 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
                          f'{edge_real:.3g} mm half-diagonal: the stop position or the lens '
                          'blocks the field, or the sensor is far larger than the image the '
                          'lens forms')
+    return coarse
+
+
+@dataclass(frozen=True)
+class _Outline:
+    """The raw image's outline: where its edge points land, real and ideal (mm, normalised)."""
+
+    points_mm: FloatArray   # (N, 2) real positions on the sensor
+    real: FloatArray        # (N,) their real heights
+    ratio: FloatArray       # (N,) ideal (normalised, the output projection) / real
+    ideal: FloatArray       # (N, 2) ideal normalised positions
+    disk: float             # the valid field's edge in the output projection (normalised)
+
+
+def _raw_outline(coarse: RadialMap, K: FloatArray, w: int, h: int, pixel_mm: tuple[float, float],
+                 projection: str) -> _Outline:
+    """Return the raw image outline in ideal normalised coordinates of the output projection."""
+    px, py = pixel_mm
     boundary = boundary_points(w, h)
     bx = (boundary[:, 0] - K[0, 2]) * px
     by = (boundary[:, 1] - K[1, 2]) * py
@@ -399,59 +435,4 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
     ratio = projected(b_theta, projection) / b_real
     boundary_ideal = np.stack([bx * ratio, by * ratio], axis=1)
     disk = float(projected(np.array(coarse.max_field_angle_rad), projection))
-    k = _scale_k(boundary_ideal, disk, ow / 2.0, oh / 2.0, fx, fy, float(vals['output.alpha']))
-    K_new = np.array([[k * fx, 0.0, (ow - 1) / 2.0], [0.0, k * fy, (oh - 1) / 2.0],
-                      [0.0, 0.0, 1.0]])
-
-    # Pass 2: the dense curve in the output projection from 0 to just past the output corner
-    # (and the raw image edge).
-    out_corner = math.hypot(ow / 2.0 / (k * fx), oh / 2.0 / (k * fy)) * v
-    raw_corner_ideal = float(np.nanmax(ratio * b_real)) * v
-    reach = min(1.02 * max(out_corner, raw_corner_ideal), disk * v * 1.001)
-    curve = resample(coarse, v, reach, CURVE_SAMPLES, projection)
-
-    fits = fit_equivalent(coarse, v, K, w, h)
-    chosen = choose_equivalent(fits)
-    disp = (boundary_ideal * v - np.stack([bx, by], axis=1)) / np.array([px, py])
-    max_disp = float(np.nanmax(np.hypot(disp[:, 0], disp[:, 1])))
-
-    model = LensModel(
-        values=vals, source=source, width=w, height=h, out_width=ow,
-        out_height=oh, pixel_mm=(px, py), focal_length_mm=f, image_distance_mm=v, curve=curve,
-        K=K, K_new=K_new, D=chosen.D, distortion_model=chosen.distortion_model,
-        fit_rms_px=chosen.rms_error_px, equivalent_max_error_px=chosen.max_error_px,
-        equivalent_fits=tuple(fits),
-        max_displacement_px=max_disp,
-        interpolation=CV_INTERPOLATION[str(vals['output.interpolation'])],
-        projection=projection, field_curve=coarse, warnings=tuple(warnings))
-    if vals['output.lateral_color_correction']:
-        model.lateral_color()       # its three traces: a channel no ray passes is refused now
-    return model
-
-
-def camera_info_yaml(model: LensModel, camera_name: str = 'mechdeconv') -> str:
-    """
-    Write the raw camera as camera_calibration_parsers YAML (what camera_info_manager loads).
-
-    K and D describe the raw camera (D = the equivalent coefficients), R is the identity and
-    P = ``[K_new | 0]``: the same content the node publishes on ``camera_info``.
-
-    :param model: the lens model.
-    :param camera_name: the ``camera_name`` field.
-    :return: YAML text.
-    """
-    def matrix(rows: int, cols: int, data: Any) -> dict[str, Any]:
-        return {'rows': rows, 'cols': cols,
-                'data': [float(x) for x in np.asarray(data, dtype=np.float64).ravel()]}
-
-    document = {
-        'image_width': model.width,
-        'image_height': model.height,
-        'camera_name': camera_name,
-        'camera_matrix': matrix(3, 3, model.K),
-        'distortion_model': model.distortion_model,
-        'distortion_coefficients': matrix(1, len(model.D), model.D),
-        'rectification_matrix': matrix(3, 3, np.eye(3)),
-        'projection_matrix': matrix(3, 4, model.P),
-    }
-    return yaml.safe_dump(document, sort_keys=False, default_flow_style=None)
+    return _Outline(np.stack([bx, by], axis=1), b_real, ratio, boundary_ideal, disk)

@@ -41,18 +41,62 @@ def summarize(model: Any) -> dict[str, Any]:
     """
     vals = model.values
     distance = scene_distance(vals)
-    edge_real = model.half_diagonal_mm
     f = model.focal_length_mm
     source: LensSource = model.source
     tolerances = source.tolerances()
     nominal, sigmas = tolerances if tolerances is not None else ({}, {})
+    depth = _depth(model, nominal, sigmas, tolerances is not None, distance)
+    field = _full_field(model)
+    warnings = _warnings(model, distance, depth, field)
+    corner_sigma = _corner_sigma_px(model, nominal, sigmas, distance, tolerances is not None)
+    first = source.first_order()
+    return {
+        'mode': source.mode,
+        'wavelength_nm': float(vals['lens.wavelength_nm']),
+        'surfaces': _surfaces(model),
+        'sensor_plane': _sensor(model, distance),
+        'focal_length_mm': f,
+        'focal_length_sigma_mm': depth['sigma_f'],
+        'image_distance_mm': model.image_distance_mm,
+        'principal_planes_mm': {
+            'front': first.front_principal_z_mm,
+            'rear': first.rear_principal_z_mm},
+        'stop_z_mm': source.stop_z_mm,
+        'scene_distance_mm': finite_or_none(distance),
+        **_scene_geometry(model, distance),
+        'f_number': depth['n_f'],
+        'entrance_pupil_diameter_mm': depth['d_a'],
+        'circle_of_confusion_mm': depth['c'],
+        'hyperfocal_mm': depth['h'],
+        'hyperfocal_sigma_mm': depth['sigma_h'],
+        'focus_distance_mm': finite_or_none(depth['focus']),
+        'depth_of_field_mm': {'near': depth['near'], 'far': finite_or_none(depth['far'])},
+        'valid_field_mm': model.curve.valid_real_mm,
+        'projection': model.projection,
+        'max_field_angle_deg': field['max_field_angle_deg'],
+        'covered_field': _covered_field(model, field),
+        '_field_curve': field,
+        'corner_sigma_px': corner_sigma,
+        'warnings': warnings,
+    }
+
+
+def _depth(model: Any, nominal: Mapping[str, float], sigmas: Mapping[str, float], known: bool,
+           distance: float) -> dict[str, float]:
+    """
+    Return f's sigma, the f-number, circle of confusion, hyperfocal distance and depth of field.
+
+    :return: ``sigma_f``, ``n_f``, ``d_a`` (the entrance pupil), ``c``, ``h``, ``sigma_h``,
+        ``focus``, ``near``, ``far``.
+    """
+    vals = model.values
+    source: LensSource = model.source
+    f = model.focal_length_mm
 
     def efl(p: Mapping[str, float]) -> float:
         return source.perturbed(p).first_order().efl_mm
 
-    sigma_f = _sigma_or_nan(efl, nominal, sigmas, tolerances is not None)
-    w_mm = scene_constraints.sensor_size_mm(model.width, vals['sensor.pixel_size_x_um'])
-    h_mm = scene_constraints.sensor_size_mm(model.height, vals['sensor.pixel_size_y_um'])
+    sigma_f = _sigma_or_nan(efl, nominal, sigmas, known)
     q = float(vals['lens.exposure_constant_q'])
     # The f-number's aperture is the entrance pupil (pupil_scale: 1 for the paper's thick lens).
     d_a = float(vals['lens.aperture_diameter_mm']) * source.pupil_scale()
@@ -70,16 +114,23 @@ def summarize(model: Any) -> dict[str, Any]:
 
     sigma_d_a = float(vals['lens.tolerance.aperture_diameter_mm']) \
         * source.pupil_scale()
-    sigma_h = _sigma_or_nan(hyper, {**nominal, 'd_a': d_a}, {**sigmas, 'd_a': sigma_d_a},
-                            tolerances is not None)
+    sigma_h = _sigma_or_nan(hyper, {**nominal, 'd_a': d_a}, {**sigmas, 'd_a': sigma_d_a}, known)
     focus = float(vals['scene.focus_distance_mm']) or distance
     focus = math.inf if focus == 0.0 else focus
     near, far = scene_constraints.depth_of_field_mm(h, focus)
+    return {'sigma_f': sigma_f, 'n_f': n_f, 'd_a': d_a, 'c': c, 'h': h, 'sigma_h': sigma_h,
+            'focus': focus, 'near': near, 'far': far}
+
+
+def _warnings(model: Any, distance: float, depth: Mapping[str, float],
+              field: Mapping[str, Any]) -> list[str]:
+    """Return the model's warnings and the summary's: depth of field, fold, valid field."""
+    edge_real = model.half_diagonal_mm
+    near, far, focus = depth['near'], depth['far'], depth['focus']
     warnings = list(model.warnings)
     if not near <= distance <= far:
         warnings.append(f'scene distance {distance:g} mm is outside the depth of field '
                         f'[{near:.4g}, {far:.4g}] mm of the focus distance {focus:g} mm')
-    field = _full_field(model)
     if field['folded']:
         warnings.append(f"the real image height folds back at {field['max_field_angle_deg']:.4g} "
                         f"deg (r = {field['image_circle_radius_mm']:.4g} mm): the valid field "
@@ -87,21 +138,16 @@ def summarize(model: Any) -> dict[str, Any]:
     if model.curve.valid_real_mm < edge_real:
         warnings.append(f'the valid field ends at {model.curve.valid_real_mm:.4g} mm, inside '
                         f'the sensor half-diagonal {edge_real:.4g} mm: corners stay black')
-    corner_sigma = _corner_sigma_px(model, nominal, sigmas, distance, tolerances is not None)
-    first = source.first_order()
+    return warnings
+
+
+def _scene_geometry(model: Any, distance: float) -> dict[str, Any]:
+    """Return the sensor size, fields of view, footprint and feature resolution (eq. 9-14)."""
+    vals = model.values
+    f = model.focal_length_mm
+    w_mm = scene_constraints.sensor_size_mm(model.width, vals['sensor.pixel_size_x_um'])
+    h_mm = scene_constraints.sensor_size_mm(model.height, vals['sensor.pixel_size_y_um'])
     return {
-        'mode': source.mode,
-        'wavelength_nm': float(vals['lens.wavelength_nm']),
-        'surfaces': _surfaces(model),
-        'sensor_plane': _sensor(model, distance),
-        'focal_length_mm': f,
-        'focal_length_sigma_mm': sigma_f,
-        'image_distance_mm': model.image_distance_mm,
-        'principal_planes_mm': {
-            'front': first.front_principal_z_mm,
-            'rear': first.rear_principal_z_mm},
-        'stop_z_mm': source.stop_z_mm,
-        'scene_distance_mm': finite_or_none(distance),
         'sensor_size_mm': {'x': w_mm, 'y': h_mm, 'diagonal': math.hypot(w_mm, h_mm)},
         'fov_deg': {'horizontal': scene_constraints.field_of_view_deg(w_mm, f),
                     'vertical': scene_constraints.field_of_view_deg(h_mm, f),
@@ -113,20 +159,6 @@ def summarize(model: Any) -> dict[str, Any]:
                 distance, vals['sensor.pixel_size_x_um'], f)),
             'y': finite_or_none(scene_constraints.feature_resolution_mm(
                 distance, vals['sensor.pixel_size_y_um'], f))},
-        'f_number': n_f,
-        'entrance_pupil_diameter_mm': d_a,
-        'circle_of_confusion_mm': c,
-        'hyperfocal_mm': h,
-        'hyperfocal_sigma_mm': sigma_h,
-        'focus_distance_mm': finite_or_none(focus),
-        'depth_of_field_mm': {'near': near, 'far': finite_or_none(far)},
-        'valid_field_mm': model.curve.valid_real_mm,
-        'projection': model.projection,
-        'max_field_angle_deg': field['max_field_angle_deg'],
-        'covered_field': _covered_field(model, field),
-        '_field_curve': field,
-        'corner_sigma_px': corner_sigma,
-        'warnings': warnings,
     }
 
 

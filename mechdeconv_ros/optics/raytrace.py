@@ -208,40 +208,8 @@ def _aim(problem: _ChiefRayProblem, field: np.ndarray, start: np.ndarray | None 
             if active.size == 0:
                 break
             h0, y0, g0 = height[active], value[active], slope[active]
-            step = -y0 / g0
-            lam = np.ones(active.size)
-            accepted = np.zeros(active.size, dtype=bool)
-            new_h, new_y, new_g = h0.copy(), y0.copy(), g0.copy()
-            pending = np.flatnonzero(np.isfinite(step))
-            for _ in range(halvings):
-                if pending.size == 0:
-                    break
-                trial = h0[pending] + lam[pending] * step[pending]
-                y1, g1 = problem.value_and_slope(trial, field[active[pending]])
-                good = (np.isfinite(y1) & (g1 * branch > 0)
-                        & ((np.abs(y1) < np.abs(y0[pending]))
-                           | (np.abs(y1) <= tolerance[active[pending]])))
-                take = pending[good]
-                accepted[take] = True
-                new_h[take], new_y[take], new_g[take] = trial[good], y1[good], g1[good]
-                # Past a fold (the slope changed sign): shorten the step to the nearer root
-                # of the quadratic through (y0, g0, g1), or half way to its vertex; else halve.
-                shrink = np.full(pending.size, 0.5)
-                fold = np.isfinite(y1) & np.isfinite(g1) & ~(g1 * branch > 0)
-                length = lam[pending] * step[pending]
-                curvature = (g1 - g0[pending]) / length
-                a0, b0 = y0[pending], g0[pending]
-                disc = b0 * b0 - 2.0 * curvature * a0
-                to_root = -2.0 * a0 / (b0 + np.copysign(np.sqrt(disc), b0))
-                to_vertex = -0.5 * b0 / curvature
-                model = np.where(disc >= 0, to_root, to_vertex) / length
-                model = np.where(np.isfinite(model), np.clip(model, 1e-3, 0.9), 0.5)
-                shrink = np.where(fold, model, shrink)
-                # ... and when that quadratic has no root and y kept its sign, neither has
-                # the branch: no real chief ray (the end of the valid field).
-                hopeless = fold & ~(disc >= 0) & (y1 * a0 > 0)
-                lam[pending] *= shrink
-                pending = pending[~good & ~hopeless]
+            accepted, new_h, new_y, new_g = _damped_step(
+                problem, field[active], h0, y0, g0, tolerance[active], branch, halvings)
             finished = accepted & (np.abs(new_y) <= tolerance[active])
             # No further decrease possible: accept what meets the contract tolerance.
             finished |= ~accepted & (np.abs(y0) <= STOP_TOLERANCE_MM)
@@ -254,6 +222,53 @@ def _aim(problem: _ChiefRayProblem, field: np.ndarray, start: np.ndarray | None 
         close = active[np.abs(value[active]) <= STOP_TOLERANCE_MM]
         result[close] = height[close]
     return result
+
+
+def _damped_step(problem: _ChiefRayProblem, field: np.ndarray, h0: np.ndarray, y0: np.ndarray,
+                 g0: np.ndarray, tolerance: np.ndarray, branch: float, halvings: int
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Take one Newton step of :func:`_aim` per ray, halved (or shortened past a fold) until taken.
+
+    The caller holds ``np.errstate(**_ERRSTATE)``.
+
+    :return: ``(accepted, h, y_stop, slope)``: which rays took a step, and where they are.
+    """
+    step = -y0 / g0
+    lam = np.ones(h0.size)
+    accepted = np.zeros(h0.size, dtype=bool)
+    new_h, new_y, new_g = h0.copy(), y0.copy(), g0.copy()
+    pending = np.flatnonzero(np.isfinite(step))
+    for _ in range(halvings):
+        if pending.size == 0:
+            break
+        trial = h0[pending] + lam[pending] * step[pending]
+        y1, g1 = problem.value_and_slope(trial, field[pending])
+        good = (np.isfinite(y1) & (g1 * branch > 0)
+                & ((np.abs(y1) < np.abs(y0[pending]))
+                   | (np.abs(y1) <= tolerance[pending])))
+        take = pending[good]
+        accepted[take] = True
+        new_h[take], new_y[take], new_g[take] = trial[good], y1[good], g1[good]
+        # Past a fold (the slope changed sign): shorten the step to the nearer root
+        # of the quadratic through (y0, g0, g1), or half way to its vertex; else halve.
+        shrink = np.full(pending.size, 0.5)
+        fold = np.isfinite(y1) & np.isfinite(g1) & ~(g1 * branch > 0)
+        length = lam[pending] * step[pending]
+        curvature = (g1 - g0[pending]) / length
+        a0, b0 = y0[pending], g0[pending]
+        disc = b0 * b0 - 2.0 * curvature * a0
+        to_root = -2.0 * a0 / (b0 + np.copysign(np.sqrt(disc), b0))
+        to_vertex = -0.5 * b0 / curvature
+        model = np.where(disc >= 0, to_root, to_vertex) / length
+        model = np.where(np.isfinite(model), np.clip(model, 1e-3, 0.9), 0.5)
+        shrink = np.where(fold, model, shrink)
+        # ... and when that quadratic has no root and y kept its sign, neither has
+        # the branch: no real chief ray (the end of the valid field).
+        hopeless = fold & ~(disc >= 0) & (y1 * a0 > 0)
+        lam[pending] *= shrink
+        pending = pending[~good & ~hopeless]
+    return accepted, new_h, new_y, new_g
 
 
 def _aim_continued(problem: _ChiefRayProblem, field: np.ndarray,

@@ -34,7 +34,8 @@ from typing import Any, Sequence
 from mechdeconv_ros.lenses.lens_source import LensSource
 from mechdeconv_ros.lenses.lens_table import mechanisms, parse_lens_state
 from mechdeconv_ros.lenses.sources import source_for
-from mechdeconv_ros.model.model import build_model, camera_info_yaml, LensModel, ModelError
+from mechdeconv_ros.model.camera_yaml import camera_info_yaml
+from mechdeconv_ros.model.model import build_model, LensModel, ModelError
 from mechdeconv_ros.schema.params import BAYER_PATTERNS, check_values, load_params_file, SPECS
 import numpy as np
 import yaml

@@ -106,43 +106,8 @@ def make_figure(model: LensModel) -> Any:
     layout = fig.add_gridspec(2, 3)
     # The four original panels first, so fig.axes[2:4] stay the raw and corrected images.
     axes = np.array([[fig.add_subplot(layout[r, c]) for c in range(2)] for r in range(2)])
-    pitch = min(model.pixel_mm)
-    ideal, real = model.curve.ideal_mm, model.curve.real_mm
-    ax = axes[0, 0]
-    ax.plot(ideal, (real - ideal) / pitch, color='tab:blue')
-    ideal_name = ('ideal (pinhole, v tan theta)' if model.projection == 'pinhole'
-                  else 'ideal (equidistant, v theta)')
-    ax.set_xlabel(f'{ideal_name} image height [mm]')
-    ax.set_ylabel('real - ideal [px]', color='tab:blue')
-    corner = model.half_diagonal_mm
-    ax.axvline(float(model.curve.ideal_from_real(np.array(min(corner, real[-1])))),
-               color='grey', ls='--', lw=0.8, label='raw image corner')
-    ax.set_title(f'traced radial distortion ({model.distortion_model}: max error '
-                 f'{model.equivalent_max_error_px:.2g} px)')
-    ax.legend(loc='lower left')
-    ax2 = ax.twinx()
-    with np.errstate(invalid='ignore', divide='ignore'):
-        ax2.plot(ideal[1:], 100.0 * (real[1:] / ideal[1:] - 1.0), color='tab:orange')
-    ax2.set_ylabel('distortion [%]', color='tab:orange')
-
-    ax = axes[0, 1]
-    nx, ny = 24, 18
-    u, v = np.meshgrid(np.linspace(0, model.width - 1, nx), np.linspace(0, model.height - 1, ny))
-    # Where each raw pixel belongs on the ideal sensor, in raw pixels: the real radius
-    # scaled by ideal / real along the same direction.
-    x_mm = (u - model.K[0, 2]) * model.pixel_mm[0]
-    y_mm = (v - model.K[1, 2]) * model.pixel_mm[1]
-    rho = np.hypot(x_mm, y_mm)
-    with np.errstate(invalid='ignore', divide='ignore'):
-        gain = np.where(rho > 0, model.curve.ideal_from_real(rho) / rho, 1.0) - 1.0
-    du, dv = x_mm * gain / model.pixel_mm[0], y_mm * gain / model.pixel_mm[1]
-    magnitude = np.hypot(du, dv)
-    quiver = ax.quiver(u, v, du, dv, magnitude, angles='xy', cmap='viridis')
-    fig.colorbar(quiver, ax=ax, label='displacement [px]')
-    ax.set_xlim(0, model.width - 1)
-    ax.set_ylim(model.height - 1, 0)
-    ax.set_aspect('equal')
-    ax.set_title(f'raw -> ideal displacement (max {model.max_displacement_px:.2f} px)')
+    _curve_panel(model, axes[0, 0])
+    _displacement_panel(model, axes[0, 1], fig)
 
     panels = ((axes[1, 0], 'what the camera sees (grid through the lens)'),
               (axes[1, 1], 'corrected'))
@@ -174,6 +139,48 @@ def make_figure(model: LensModel) -> Any:
                   interpolation='bilinear', extent=(-0.5, image.shape[1] - 0.5,
                                                     image.shape[0] - 0.5, -0.5))
     return fig
+
+
+def _curve_panel(model: LensModel, ax: Any) -> None:
+    """Draw the traced radial distortion: real - ideal in px, and in percent on a twin axis."""
+    pitch = min(model.pixel_mm)
+    ideal, real = model.curve.ideal_mm, model.curve.real_mm
+    ax.plot(ideal, (real - ideal) / pitch, color='tab:blue')
+    ideal_name = ('ideal (pinhole, v tan theta)' if model.projection == 'pinhole'
+                  else 'ideal (equidistant, v theta)')
+    ax.set_xlabel(f'{ideal_name} image height [mm]')
+    ax.set_ylabel('real - ideal [px]', color='tab:blue')
+    corner = model.half_diagonal_mm
+    ax.axvline(float(model.curve.ideal_from_real(np.array(min(corner, real[-1])))),
+               color='grey', ls='--', lw=0.8, label='raw image corner')
+    ax.set_title(f'traced radial distortion ({model.distortion_model}: max error '
+                 f'{model.equivalent_max_error_px:.2g} px)')
+    ax.legend(loc='lower left')
+    ax2 = ax.twinx()
+    with np.errstate(invalid='ignore', divide='ignore'):
+        ax2.plot(ideal[1:], 100.0 * (real[1:] / ideal[1:] - 1.0), color='tab:orange')
+    ax2.set_ylabel('distortion [%]', color='tab:orange')
+
+
+def _displacement_panel(model: LensModel, ax: Any, fig: Any) -> None:
+    """Draw where each raw pixel belongs on the ideal sensor (arrows, in raw px)."""
+    nx, ny = 24, 18
+    u, v = np.meshgrid(np.linspace(0, model.width - 1, nx), np.linspace(0, model.height - 1, ny))
+    # Where each raw pixel belongs on the ideal sensor, in raw pixels: the real radius
+    # scaled by ideal / real along the same direction.
+    x_mm = (u - model.K[0, 2]) * model.pixel_mm[0]
+    y_mm = (v - model.K[1, 2]) * model.pixel_mm[1]
+    rho = np.hypot(x_mm, y_mm)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        gain = np.where(rho > 0, model.curve.ideal_from_real(rho) / rho, 1.0) - 1.0
+    du, dv = x_mm * gain / model.pixel_mm[0], y_mm * gain / model.pixel_mm[1]
+    magnitude = np.hypot(du, dv)
+    quiver = ax.quiver(u, v, du, dv, magnitude, angles='xy', cmap='viridis')
+    fig.colorbar(quiver, ax=ax, label='displacement [px]')
+    ax.set_xlim(0, model.width - 1)
+    ax.set_ylim(model.height - 1, 0)
+    ax.set_aspect('equal')
+    ax.set_title(f'raw -> ideal displacement (max {model.max_displacement_px:.2f} px)')
 
 
 def illumination_panels(model: LensModel, curve_ax: Any, map_ax: Any, fig: Any) -> None:
