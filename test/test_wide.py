@@ -61,7 +61,7 @@ def fisheye() -> LensModel:
 
 @pytest.fixture(scope='module')
 def wa170_3um() -> Any:
-    """The WA170 prescription of the model on 3 um pixels (built once for the trace tests)."""
+    """Return the WA170 prescription of the model on 3 um pixels (built once, two tests)."""
     return build_model(wide_values(3.0)).prescription
 
 
