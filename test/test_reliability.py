@@ -969,7 +969,11 @@ def test_sizes_beyond_the_memory_bound_are_refused(strict: Link) -> None:
         largest_ms = (time.monotonic() - started) * 1e3
         assert result.successful, result.reason
         try:
-            model, _ = model_of(dict(link.values, **arrays), *SMALL)
+            # The same build here, timed: the node's validation is one such build (the load
+            # gauge of the bounds below: a loaded machine slows both alike).
+            started = time.monotonic()
+            model = build_model(dict(link.values, **arrays), *SMALL)
+            build_ms = (time.monotonic() - started) * 1e3
             stamps = []
             for _ in range(90):
                 stamps.append(link.send(frame))
@@ -985,11 +989,16 @@ def test_sizes_beyond_the_memory_bound_are_refused(strict: Link) -> None:
             assert cleared.successful, cleared.reason
     print(f'\nresource guards: node RSS {rss[0]:.0f} -> {rss[1]:.0f} MiB over the refused '
           f'sets, {rss[2]:.0f} -> {rss[3]:.0f} MiB over the refused frame')
-    print(f'largest prescription ({MAX_SURFACES} surfaces): accepted in {largest_ms:.0f} ms; '
-          f'largest gap between output frames while it was summarised: {gap_ms:.0f} ms')
+    print(f'largest prescription ({MAX_SURFACES} surfaces): accepted in {largest_ms:.0f} ms '
+          f'(one build here {build_ms:.0f} ms); largest gap between output frames while it was '
+          f'summarised: {gap_ms:.0f} ms')
     # A refusal allocates nothing of the size it refuses (one such model: >= 400 MiB).
     assert rss[1] - rss[0] < 16.0 and rss[3] - rss[2] < 16.0, rss
-    assert largest_ms < 1000.0 and gap_ms < 500.0
+    # The set waits for one model build, not for the summary (many builds' worth of traces);
+    # the frames do not wait for the summary either. Bounds in units of that build, so a
+    # loaded machine (which slows the build and the node alike) does not fail them.
+    assert largest_ms < max(1000.0, 4.0 * build_ms), (largest_ms, build_ms)
+    assert gap_ms < max(500.0, 2.0 * build_ms), (gap_ms, build_ms)
     assert link.proc.running()
 
 
