@@ -553,7 +553,7 @@ def _set_parameters_test(probe: Probe, doc: dict[str, Any], size: str, repeats: 
 def child_main(transport: str, quick: bool, out_json: Path) -> int:
     """Measure one transport (this process's Fast DDS profile is fixed by its environment)."""
     sizes = QUICK_SIZES if quick else SIZES
-    paced_s, short_s = (1.0, 1.0) if quick else (WINDOW_PACED_S, WINDOW_SHORT_S)
+    paced_s, short_s = (0.6, 0.6) if quick else (WINDOW_PACED_S, WINDOW_SHORT_S)
     rates = (RATE_HZ,) if transport == 'default' else (RATE_HZ, HIGH_RATE_HZ, 0.0)
     if quick:
         rates = (RATE_HZ,)
@@ -767,8 +767,8 @@ def run(out_dir: Path = RESULTS, quick: bool = False, plots: bool = True,
                       'busy_others_cores': BUSY_OTHERS_CORES,
                       'flat_out_min_cores': FLAT_OUT_MIN_CORES,
                       'flat_out_share': FLAT_OUT_SHARE},
-        'windows_s': {'paced_30hz': 1.0 if quick else WINDOW_PACED_S,
-                      'other': 1.0 if quick else WINDOW_SHORT_S, 'warmup': WARMUP_S},
+        'windows_s': {'paced_30hz': 0.6 if quick else WINDOW_PACED_S,
+                      'other': 0.6 if quick else WINDOW_SHORT_S, 'warmup': WARMUP_S},
         'children': children,
         'targets': evaluate(children),
         'errors': errors,

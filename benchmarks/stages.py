@@ -144,6 +144,46 @@ def bare_remap(width: int, height: int, reps: int, idle_s: float = 1.0 / RATE_HZ
     return out
 
 
+def frame_traffic(width: int, height: int, reps: int = 5) -> dict[str, Any]:
+    """
+    Return the bytes each rung moves per output frame in its callback, and the DRAM floor.
+
+    Counted on the Python side of the frame path (what the callback reads and writes; the
+    transport's own copies, rclpy's conversions and Fast DDS's, are the relay's and every
+    rung's alike): the source frame read, the output written, and the maps read, at their
+    form in the rung (``remap``, ``info``, ``info_rect`` and ``correct_node``: the node's maps;
+    ``remap_fixed``: CV_16SC2 + CV_16UC1, 6 bytes per output pixel). ``copy`` reads the frame
+    and writes the message. The floor is those bytes at the cold copy bandwidth measured here
+    (``np.copyto`` of a frame after a 64 MiB pass evicts the caches, median of ``reps``).
+
+    :param width: frame width.
+    :param height: frame height.
+    :param reps: cold copies timed.
+    :return: ``{'bytes': {rung: bytes}, 'map_bytes': {...}, 'cold_copy_gb_s', 'floor_ms'}``.
+    """
+    import cv2
+    import numpy as np
+
+    rect, src, dst, _, _ = node_remap(width, height)
+    fixed = cv2.convertMaps(rect.map1, rect.map2, cv2.CV_16SC2)
+    maps = {'node': rect.map1.nbytes + rect.map2.nbytes,
+            'fixed': fixed[0].nbytes + fixed[1].nbytes}
+    frame = src.nbytes + dst.nbytes
+    flush = np.ones(64 << 20, np.uint8)
+    times = []
+    for _ in range(reps):
+        flush += 1
+        start = time.perf_counter()
+        np.copyto(dst, src)
+        times.append(time.perf_counter() - start)
+    gb_s = frame / statistics.median(times) / 1e9
+    moved = {'relay': 0, 'copy': frame, 'remap': frame + maps['node'],
+             'info': frame + maps['node'], 'info_rect': frame + maps['node'],
+             'node': frame + maps['node'], 'remap_fixed': frame + maps['fixed']}
+    return {'bytes': moved, 'map_bytes': maps, 'frame_bytes': frame, 'cold_copy_gb_s': gb_s,
+            'floor_ms': {rung: b / gb_s / 1e6 for rung, b in moved.items()}}
+
+
 def thread_cpu_s(pid: int) -> dict[int, tuple[str, float]]:
     """
     Return ``{tid: (name, CPU seconds)}`` of a process's threads (``/proc/PID/task``).
@@ -221,12 +261,14 @@ def measure_rung(probe: Probe, rung: str, width: int, height: int, env: Mapping[
     env = dict(env, **{STAGE_ENV: str(stage_file)})
     result: dict[str, Any] = {'rung': rung, 'size': f'{width}x{height}', 'errors': []}
     relay = start_child(_rung_argv(rung, baseline), env, log_dir, f'{rung}_{tag}')
-    pub: Child | None = None
+    # The publisher starts while the relay does (its frames before the relay subscribes are
+    # simply not received): the two start-ups overlap instead of adding up.
+    pub: Child | None = start_child(publisher_argv(width, height, RATE_HZ), env, log_dir,
+                                    f'pub_{tag}')
     try:
         if not probe.ready(READY_TIMEOUT_S):
             result['errors'].append(f'{rung}: not ready: {relay.tail()}')
             return result
-        pub = start_child(publisher_argv(width, height, RATE_HZ), env, log_dir, f'pub_{tag}')
         probe.first_frame(6.0)
         probe.spin_for(warmup_s)
         cpu0 = thread_cpu_s(relay.pid)
@@ -275,11 +317,12 @@ def child_main(quick: bool, out_json: Path, baseline: str = '',
     """Measure the rungs at every size (this process has the shm profile)."""
     sizes = QUICK_SIZES if quick else SIZES
     rungs = tuple(only) + (('baseline',) if baseline else ())
-    rounds, window_s, warmup_s = (1, 1.0, 0.5) if quick else (ROUNDS, WINDOW_S, WARMUP_S)
+    rounds, window_s, warmup_s = (1, 0.6, 0.2) if quick else (ROUNDS, WINDOW_S, WARMUP_S)
     env = dict(os.environ)
-    doc: dict[str, Any] = {'bare_remap': {}, 'runs': [], 'errors': []}
+    doc: dict[str, Any] = {'bare_remap': {}, 'traffic': {}, 'runs': [], 'errors': []}
     for width, height in sizes:
         doc['bare_remap'][f'{width}x{height}'] = bare_remap(width, height, 6 if quick else 90)
+        doc['traffic'][f'{width}x{height}'] = frame_traffic(width, height, 3 if quick else 15)
     log_dir = Path(tempfile.mkdtemp(prefix='mechdeconv_bench_stages_'))
     doc['log_dir'] = str(log_dir)
     probe = Probe(int(env['ROS_DOMAIN_ID']), name='stage_probe')
@@ -347,7 +390,7 @@ def run(out_dir: Path = RESULTS, quick: bool = False, baseline: str = '',
     Run the stage benchmark in a child process; write ``stages.json`` into ``out_dir``.
 
     :param out_dir: results folder.
-    :param quick: one small size, one round, 1 s windows.
+    :param quick: one small size, one round, 0.6 s windows.
     :param baseline: a checkout of the repository whose correct_node runs as one more rung,
         ``baseline`` (before/after comparisons in one run; its stages are timed only if it
         has the stage clock).
@@ -381,6 +424,7 @@ def run(out_dir: Path = RESULTS, quick: bool = False, baseline: str = '',
            'load_average_1min': os.getloadavg()[0], 'rate_hz': RATE_HZ,
            'rungs': list(only) + (['baseline'] if baseline else []),
            'stages': list(STAGES), 'bare_remap': measured['bare_remap'],
+           'traffic': measured.get('traffic', {}),
            'runs': measured['runs'], 'errors': errors}
     doc['targets'] = evaluate(doc)
     write_json(out_dir / 'stages.json', doc)
@@ -434,6 +478,15 @@ def tables(doc: Mapping[str, Any]) -> list[str]:
         rows.append(row('CPU ms/frame, executor (main) thread', '', 'main'))
         rows.append(row('CPU ms/frame, rebuild + summary threads', '', 'model threads'))
         rows.append(row('CPU ms/frame, other threads (OpenCV, Fast DDS)', '', 'other threads'))
+        traffic = doc.get('traffic', {}).get(size)
+        if traffic:
+            moved = [traffic['bytes'].get(r) for r in rungs]
+            floor = [traffic['floor_ms'].get(r) for r in rungs]
+            rows.append(['memory traffic, MB/frame (frame + maps, callback)']
+                        + [fmt_num(b / 1e6 if b is not None else None, 1) for b in moved]
+                        + ['-'])
+            rows.append(['  at the cold copy bandwidth, ms'] + [fmt_ms(f) for f in floor]
+                        + ['-'])
         rows.append(['delivered fps'] + [fmt_num(c.get('fps')) if c else '-' for c in cols]
                     + ['-'])
         rows.append(['others cores (machine load)'] + [fmt_num(c.get('others_cores'), 2)
@@ -446,8 +499,8 @@ def tables(doc: Mapping[str, Any]) -> list[str]:
                   f"{fmt_ms(bare.get('cv2_remap_1t', {}).get('median_ms'))} ms; after "
                   f"{bare.get('idle_s', 0) * 1e3:.0f} ms idle (as between frames) "
                   f"{fmt_ms(bare.get('cv2_remap_idle', {}).get('median_ms'))} ms, at 1 "
-                  f"thread {fmt_ms(bare.get('cv2_remap_1t_idle', {}).get('median_ms'))} ms.",
-                  '']
+                  f"thread {fmt_ms(bare.get('cv2_remap_1t_idle', {}).get('median_ms'))} ms."
+                  + _traffic_note(doc.get('traffic', {}).get(size)), '']
         lines += markdown_table(['stage, ms'] + [RUNG_TITLES[r] for r in rungs]
                                 + ['node - relay'], rows)
         lines.append('')
@@ -469,6 +522,17 @@ def tables(doc: Mapping[str, Any]) -> list[str]:
     lines += ['', f"Machine: {machine_line(doc['machine'])}; 1-minute load average "
               f"{doc.get('load_average_1min', math.nan):.2f}.", '']
     return lines
+
+
+def _traffic_note(traffic: Mapping[str, Any] | None) -> str:
+    """Return the sentence on the frame's memory traffic (empty without the figures)."""
+    if not traffic:
+        return ''
+    maps = traffic['map_bytes']
+    return (f" Memory traffic: the frame in + out {traffic['frame_bytes'] / 1e6:.1f} MB, the "
+            f"node's maps {maps['node'] / 1e6:.1f} MB (fixed point {maps['fixed'] / 1e6:.1f} "
+            f"MB); cold copy bandwidth {traffic['cold_copy_gb_s']:.1f} GB/s, so the node's "
+            f"remap cannot take less than {traffic['floor_ms']['node']:.2f} ms from memory.")
 
 
 def main(argv: list[str] | None = None) -> int:

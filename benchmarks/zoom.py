@@ -44,7 +44,7 @@ import struct
 import sys
 import tempfile
 import time
-from typing import Any
+from typing import Any, Sequence
 
 from benchmarks.common import log, RESULTS
 from benchmarks.node_latency import latency_stats, start_child
@@ -317,7 +317,8 @@ def _node_argv(kind: str, width: int, height: int) -> list[str]:
     return [sys.executable, '-m', 'benchmarks.passthrough_node']
 
 
-def node_run(width: int, height: int, seconds: float, grid: Any) -> dict[str, Any]:
+def node_run(width: int, height: int, seconds: float, grid: Any, warmup_s: float = 1.0,
+             kinds: Sequence[str] = ('passthrough', 'still', 'node')) -> dict[str, Any]:
     """Run the relay and the node under the sweeping publisher; latency and states used."""
     import numpy as np
 
@@ -332,22 +333,23 @@ def node_run(width: int, height: int, seconds: float, grid: Any) -> dict[str, An
     monotonic = bool(np.all(np.diff(focals) > 0))
     out['focal_monotonic'] = monotonic
     try:
-        for kind in ('passthrough', 'still', 'node'):
+        for kind in kinds:
             proc = start_child(_node_argv(kind, width, height), env, log_dir, kind)
-            pub = None
+            # The publisher starts with the node (their start-ups overlap; the sweep's time
+            # origin is the publisher's, whenever the node starts taking frames).
+            pub = start_child([sys.executable, '-m', 'benchmarks.zoom', '--role',
+                               'publisher', '--width', str(width), '--height',
+                               str(height)], env, log_dir, f'publisher_{kind}')
             try:
                 ready = probe.spin_until(
                     lambda: probe.node.count_subscribers('/image_raw') > 0 and
                     probe.node.count_publishers('/image_rect') > 0, READY_TIMEOUT_S)
-                pub = start_child([sys.executable, '-m', 'benchmarks.zoom', '--role',
-                                   'publisher', '--width', str(width), '--height',
-                                   str(height)], env, log_dir, f'publisher_{kind}')
                 # The first frame (the node's grid is built at start-up: fixed sensor size),
-                # then a second of warm-up.
+                # then the warm-up.
                 probe.frames.clear()
                 probe.recording = True
                 first = probe.spin_until(lambda: len(probe.frames) > 0, READY_TIMEOUT_S)
-                probe.spin_until(lambda: False, 1.0)
+                probe.spin_until(lambda: False, warmup_s)
                 probe.recording = False
                 if not first:
                     out['errors'].append(f'{kind}: no frame within {READY_TIMEOUT_S} s')
@@ -419,7 +421,9 @@ def run(out_dir: Path = RESULTS, quick: bool = False, ros: bool = True) -> dict[
     doc: dict[str, Any] = {'benchmark': 'zoom', 'machine': machine_info(), 'method': __doc__,
                            'load_1min': os.getloadavg()[0], 'core': core, 'errors': []}
     if ros:
-        node = node_run(width, height, 3.0 if quick else WINDOW_S, grid)
+        # Quick: no 'still' run (the same node and loop as 'node', with the joint off).
+        node = node_run(width, height, 1.0 if quick else WINDOW_S, grid, 0.3 if quick else 1.0,
+                        ('passthrough', 'node') if quick else ('passthrough', 'still', 'node'))
         doc['node'] = node
         doc['errors'] += node.get('errors', [])
         relay, ours = node.get('passthrough', {}), node.get('node', {})

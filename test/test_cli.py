@@ -109,13 +109,23 @@ def test_plot_writes_a_png(tmp_path, capsys):
 ], ids=['scene-inside-f', 'afocal', 'negative-pixel', 'missing-file', 'zero-width',
         'no-size', 'missing-image', 'focus-inside-f', 'stop-behind-sensor', 'aperture-1000',
         'circle-of-confusion'])
-def test_bad_input_is_one_line_and_status_2(argv, words):
-    proc = subprocess.run([sys.executable, '-m', 'mechdeconv_ros.tools.cli', *argv],
+def test_bad_input_is_one_line_and_status_2(capsys, argv, words):
+    # In this process (main() is what the console script runs; the subprocess route is
+    # test_the_console_entry_exits_2_in_one_line).
+    status, _, err = run(capsys, *argv)
+    assert status == 2
+    assert 'Traceback' not in err
+    assert len(err.strip().splitlines()) == 1, err
+    assert words in err
+
+
+def test_the_console_entry_exits_2_in_one_line():
+    proc = subprocess.run([sys.executable, '-m', 'mechdeconv_ros.tools.cli', 'info', '--params',
+                           CASE2, '-p', 'lens.stop_offset_mm=-10'],
                           capture_output=True, text=True, cwd=ROOT, timeout=60)
     assert proc.returncode == 2
-    assert 'Traceback' not in proc.stderr
-    assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
-    assert words in proc.stderr
+    assert proc.stderr.strip().splitlines() == [
+        proc.stderr.strip()] and 'lens.stop_offset_mm: -10 mm puts the stop' in proc.stderr
 
 
 def test_unreadable_image(tmp_path):

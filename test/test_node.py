@@ -840,13 +840,14 @@ def test_fastdds_profile_loads_and_carries_720p_rgb8_at_30hz_best_effort(
 # ---------------------------------------------------------------------------------------------
 
 def _measure_one_set(harness: Harness, out: Outputs, msg: Image, value: float
-                     ) -> tuple[float, float, float]:
+                     ) -> tuple[float, float, float, int]:
     """
     Stream frames at 30 Hz, set lens.stop_offset_mm mid-stream, time the switch.
 
     :return: ``(ms from the set_parameters reply to the first output of the new model
         (negative if it came first), ms from the request to it, the largest gap between two
-        output images while streaming, ms)``.
+        output images while streaming, ms, output images that arrived between the reply and
+        the first image of the new model)``.
     """
     client, period = harness.client, 1.0 / 30.0
     start = len(out.arrivals)
@@ -879,8 +880,9 @@ def _measure_one_set(harness: Harness, out: Outputs, msg: Image, value: float
         client.executor.spin_once(timeout_sec=max(0.0, min(0.005, next_send - now)))
     assert reply_at is not None and new_at is not None, 'no frame of the new model within 8 s'
     images = [when for when, kind, _ in out.arrivals[start:] if kind == 'image']
+    old_during = sum(1 for when in images if reply_at <= when < new_at)
     return ((new_at - reply_at) * 1e3, (new_at - sent_at) * 1e3,
-            float(np.max(np.diff(images))) * 1e3)
+            float(np.max(np.diff(images))) * 1e3, old_during)
 
 
 @pytest.mark.parametrize('size', [(640, 480), (1920, 1080)], ids=['640x480', '1920x1080'])
@@ -893,12 +895,15 @@ def test_param_set_to_first_new_frame_at_30fps(harness: Harness, size: tuple[int
     try:
         # Warm up: the first frame of this size builds its model synchronously.
         harness.exchange(out, msg, timeout=10.0)
-        latencies, from_request, rebuilds, gaps = [], [], [], []
-        for value in (0.3, 0.2, 0.35, 0.2):
-            latency, total, gap = _measure_one_set(harness, out, msg, value)
+        latencies, from_request, rebuilds, gaps, old_during = [], [], [], [], []
+        # 1080p: two sets (each costs a 1080p rebuild; the timing itself is benchmarked in
+        # benchmarks/node_latency.py, median of many).
+        for value in (0.3, 0.2, 0.35, 0.2) if width < 1920 else (0.3, 0.2):
+            latency, total, gap, during = _measure_one_set(harness, out, msg, value)
             latencies.append(latency)
             from_request.append(total)
             gaps.append(gap)
+            old_during.append(during)
             rebuilds.append(float(harness.diag()['last_rebuild_ms']))
         harness.values['lens.stop_offset_mm'] = 0.2
 
@@ -909,10 +914,18 @@ def test_param_set_to_first_new_frame_at_30fps(harness: Harness, size: tuple[int
         print(f'\n{width}x{height} rgb8 at 30 fps: set_parameters reply -> first frame of the '
               f'new model {listing(latencies)}, from the request {listing(from_request)}; '
               f'rebuild (model + maps) {listing(rebuilds)}; '
-              f'largest gap between output frames {max(gaps):.1f} ms')
-        # Generous bounds (shared 2-core machines): the new model arrives within a few frames
-        # and frames keep flowing while the maps are rebuilt.
-        assert statistics.median(latencies) < 500.0
-        assert max(gaps) < 500.0
+              f'largest gap between output frames {max(gaps):.1f} ms; frames of the old '
+              f'model after the reply {old_during}')
+        # No wall-clock bound here (the number is a benchmark's, measured as a ratio): every
+        # set reached the frames (within _measure_one_set's deadline), and the rebuild does
+        # not block the frame path. A rebuild in the executor would hold the reply until the
+        # maps are done, then the next output would already be the new model's; rebuilt
+        # aside, the old model's frames keep arriving after the reply. So whenever the rebuild
+        # (as the node times it) lasted more than two frame periods, frames of the old model
+        # arrived between the reply and the first frame of the new one.
+        period_ms = 1e3 / 30.0
+        slow = [during for rebuild_ms, during in zip(rebuilds, old_during)
+                if rebuild_ms > 2.0 * period_ms]
+        assert all(during >= 1 for during in slow), (rebuilds, old_during)
     finally:
         out.close()

@@ -969,7 +969,11 @@ def test_sizes_beyond_the_memory_bound_are_refused(strict: Link) -> None:
         largest_ms = (time.monotonic() - started) * 1e3
         assert result.successful, result.reason
         try:
-            model, _ = model_of(dict(link.values, **arrays), *SMALL)
+            # The same build here, timed: the node's validation is one such build (the load
+            # gauge of the bounds below: a loaded machine slows both alike).
+            started = time.monotonic()
+            model = build_model(dict(link.values, **arrays), *SMALL)
+            build_ms = (time.monotonic() - started) * 1e3
             stamps = []
             for _ in range(90):
                 stamps.append(link.send(frame))
@@ -985,11 +989,16 @@ def test_sizes_beyond_the_memory_bound_are_refused(strict: Link) -> None:
             assert cleared.successful, cleared.reason
     print(f'\nresource guards: node RSS {rss[0]:.0f} -> {rss[1]:.0f} MiB over the refused '
           f'sets, {rss[2]:.0f} -> {rss[3]:.0f} MiB over the refused frame')
-    print(f'largest prescription ({MAX_SURFACES} surfaces): accepted in {largest_ms:.0f} ms; '
-          f'largest gap between output frames while it was summarised: {gap_ms:.0f} ms')
+    print(f'largest prescription ({MAX_SURFACES} surfaces): accepted in {largest_ms:.0f} ms '
+          f'(one build here {build_ms:.0f} ms); largest gap between output frames while it was '
+          f'summarised: {gap_ms:.0f} ms')
     # A refusal allocates nothing of the size it refuses (one such model: >= 400 MiB).
     assert rss[1] - rss[0] < 16.0 and rss[3] - rss[2] < 16.0, rss
-    assert largest_ms < 1000.0 and gap_ms < 500.0
+    # The set waits for one model build, not for the summary (many builds' worth of traces);
+    # the frames do not wait for the summary either. Bounds in units of that build, so a
+    # loaded machine (which slows the build and the node alike) does not fail them.
+    assert largest_ms < max(1000.0, 4.0 * build_ms), (largest_ms, build_ms)
+    assert gap_ms < max(500.0, 2.0 * build_ms), (gap_ms, build_ms)
     assert link.proc.running()
 
 
@@ -1301,6 +1310,12 @@ def test_overload_keeps_latency_and_memory_bounded(default: Link) -> None:
         seconds = 6.0
         sent = stream(rate_in, seconds, rss)
         link.client.spin_for(0.5)
+        # The node's mean frame time over its last diagnostics period (in the overload): on a
+        # loaded machine its own rate can drop between the two windows, so the bounds below
+        # are in units of its own frame period, the longer of the two.
+        frame_ms_after = float(link.diag()['frame_time_ms_mean'])
+        if not math.isfinite(frame_ms_after):
+            frame_ms_after = frame_ms
     finally:
         link.node.destroy_subscription(sub)
         restore = link.set_messages([param_msg('output.interpolation', 'linear')])
@@ -1310,15 +1325,17 @@ def test_overload_keeps_latency_and_memory_bounded(default: Link) -> None:
     rate_out = len(ours) / seconds
     third = max(1, len(latency) // 3)
     p50, p99 = np.percentile(latency, [50, 99])
-    period_ms = 1e3 / node_rate
+    period_ms = max(1e3 / node_rate, frame_ms_after)
+    own_rate = min(node_rate, 1e3 / frame_ms_after)
     print(f'\noverload, {width}x{height} rgb8, lanczos4: node rate {node_rate:.1f} fps '
-          f'(node frame time {frame_ms:.0f} ms); input {sent / seconds:.1f} fps -> output '
+          f'(node frame time {frame_ms:.0f} ms, {frame_ms_after:.0f} ms in the overload); '
+          f'input {sent / seconds:.1f} fps -> output '
           f'{rate_out:.1f} fps; latency p50 {p50:.0f} ms, p99 {p99:.0f} ms, first third '
           f'median {np.median(latency[:third]):.0f} ms, last third '
           f'{np.median(latency[-third:]):.0f} ms; node RSS {rss[0]:.0f} -> {rss[-1]:.0f} MiB '
           f'(max {max(rss):.0f}, {len(rss)} samples)')
     assert sent / seconds > 1.5 * node_rate, 'the input was not an overload'
-    assert rate_out >= 0.6 * node_rate, 'the node stopped keeping up with its own rate'
+    assert rate_out >= 0.6 * own_rate, 'the node stopped keeping up with its own rate'
     assert p99 < 3.0 * period_ms + 250.0, 'frames queue up: the newest frame does not win'
     # No build-up: the last third waits no longer than the first (a queue would add a frame
     # period per frame it holds).

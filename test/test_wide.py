@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import cv2
 from mechdeconv_ros.imaging.remap import build_float_maps, Rectifier
@@ -58,10 +59,16 @@ def fisheye() -> LensModel:
                                            'output.alpha': 1.0}))
 
 
+@pytest.fixture(scope='module')
+def wa170_3um() -> Any:
+    """Return the WA170 prescription of the model on 3 um pixels (built once, two tests)."""
+    return build_model(wide_values(3.0)).prescription
+
+
 # --- the trace by field angle ---------------------------------------------------------------
 
-def test_field_angles_pass_90_deg_at_infinity() -> None:
-    lens = build_model(wide_values(3.0)).prescription
+def test_field_angles_pass_90_deg_at_infinity(wa170_3um: Any) -> None:
+    lens = wa170_3um
     z, _ = rt.image_plane(lens, math.inf)
     theta = np.radians(np.linspace(0.0, 100.0, 201))
     real = -rt.trace_field_angles(lens, math.inf, z, theta)
@@ -69,8 +76,8 @@ def test_field_angles_pass_90_deg_at_infinity() -> None:
     assert np.all(np.diff(real) > 0)
 
 
-def test_a_wide_field_traced_alone_lands_as_in_a_batch() -> None:
-    lens = build_model(wide_values(3.0)).prescription
+def test_a_wide_field_traced_alone_lands_as_in_a_batch(wa170_3um: Any) -> None:
+    lens = wa170_3um
     z, _ = rt.image_plane(lens, math.inf)
     batch = np.radians(np.linspace(0.0, 99.0, 100))
     heights = rt.trace_field_angles(lens, math.inf, z, batch)

@@ -42,6 +42,10 @@ Threading rule (the one rule; every shared field follows it):
 * **summary thread** (``mechdeconv-summary``, started with it): computes the summary of the
   model in use for diagnostics (``model.report()``: seconds for a fisheye or a long
   prescription) and logs its warnings once, so a parameter set never waits for a summary.
+  It starts a new model's summary once two frames have taken that model, or after
+  ``SUMMARY_DEFER_S``: the summary is 15 to 40 ms of mostly GIL-holding Python for the thick
+  lens at 1080p, which would otherwise run during the first frame of the new model and delay
+  it at every GIL hand-over (the parameter set -> first new frame latency).
 * **signal path**: never touches the model; it only sets the spin loop's stop flag, and the
   executor thread then calls :meth:`LiveModel.stop` (through ``destroy_node``).
 
@@ -80,6 +84,10 @@ MAX_SURFACES = int(SPECS['lens.stop_surface'].maximum) + 1
 #: Names of the rebuild thread and of the summary thread.
 THREAD_NAME = 'mechdeconv-rebuild'
 SUMMARY_THREAD_NAME = 'mechdeconv-summary'
+#: The longest the summary of a new model waits for two frames to take that model, s.
+SUMMARY_DEFER_S = 0.25
+#: How often the waiting summary thread looks (it is not woken by the frame path).
+SUMMARY_POLL_S = 0.005
 
 #: ``build_model(values, width, height) -> LensModel`` (may raise ValueError).
 ModelBuilder = Callable[[Mapping[str, Any], int, int], Any]
@@ -251,6 +259,9 @@ class LiveModel:
         self._last_rebuild_ms = math.nan
         self._validated: tuple[tuple[Any, ...], Any] | None = None
         self._report: tuple[int, dict[str, Any]] | None = None
+        # (revision, frames that took it): written by the executor without the lock (one
+        # tuple reference, read whole), read by the summary thread to defer its work.
+        self._frames_of_revision: tuple[int, int] = (0, 0)
         self._failed_build: tuple[int, int, int] | None = None    # executor thread only
         self._warmed_size: tuple[int, int] | None = None          # rebuild thread only
         self._threads: list[threading.Thread] = []
@@ -365,6 +376,10 @@ class LiveModel:
         """
         active = self._active                       # read the reference once
         if active is not None and _image_size(active.model) == (width, height):
+            revision, frames = self._frames_of_revision
+            if revision != active.revision or frames < 2:
+                self._frames_of_revision = (active.revision,
+                                            frames + 1 if revision == active.revision else 1)
             return active
         with self._lock:
             values, generation = dict(self._values), self._values_generation
@@ -499,8 +514,24 @@ class LiveModel:
                 self._summarizing = True
                 self._report_wanted = False
                 active = self._active
+            self._wait_for_frames(active)
             # Cached per revision: free when the model in use has its summary already.
             self._summarize(active)
+
+    def _wait_for_frames(self, active: ActiveModel | None) -> None:
+        """Wait until two frames took ``active`` (or SUMMARY_DEFER_S, or the stop)."""
+        if active is None:
+            return
+        deadline = time.monotonic() + SUMMARY_DEFER_S
+        while time.monotonic() < deadline:
+            revision, frames = self._frames_of_revision
+            if revision > active.revision or (revision == active.revision and frames >= 2):
+                return
+            with self._lock:
+                if self._stopping or (self._report is not None
+                                      and self._report[0] == active.revision):
+                    return
+                self._lock.wait(SUMMARY_POLL_S)
 
     def _rebuild(self, values: dict[str, ParamValue], generation: int,
                  size: tuple[int, int] | None, active: ActiveModel | None) -> None:

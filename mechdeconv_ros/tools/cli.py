@@ -44,6 +44,8 @@ import yaml
 
 #: The colour (0 R, 1 G, 2 B) of each channel of an image cv2.imread returns, by channel count.
 BGR_COLOURS = {3: (2, 1, 0), 4: (2, 1, 0, 1)}
+#: The pixel types cv2.remap takes (a file may hold others, e.g. int8 or int32 TIFFs).
+REMAP_DTYPES = (np.uint8, np.uint16, np.int16, np.float32, np.float64)
 IMAGE_SUFFIXES = ('.png', '.jpg', '.jpeg', '.bmp', '.tif', '.tiff', '.pgm', '.ppm')
 
 
@@ -64,7 +66,11 @@ def _values(args: argparse.Namespace) -> dict[str, Any]:
         if not sep or name not in SPECS:
             raise UsageError(f'-p {item}: expected NAME=VALUE with a known parameter name')
         try:
-            values.update(check_values({name: yaml.safe_load(text)}, partial=True))
+            value = yaml.safe_load(text)
+        except yaml.YAMLError as err:
+            raise UsageError(f'-p {item}: the value is not YAML ({_one_line(err)})') from None
+        try:
+            values.update(check_values({name: value}, partial=True))
         except ValueError as err:
             raise UsageError(str(err)) from None
     return values
@@ -96,7 +102,11 @@ def _moving_source(args: argparse.Namespace, values: dict[str, Any]) -> LensSour
         state = parse_lens_state(text)
     except ValueError as err:
         raise UsageError(str(err)) from None
-    moving = {m.name: m for m in mechanisms(values)}
+    try:
+        # A malformed table is refused here as it is without --lens-state (build_model).
+        moving = {m.name: m for m in mechanisms(values)}
+    except ValueError as err:
+        raise UsageError(str(err)) from None
     for name, position in state.items():
         if name not in moving:
             raise UsageError(f'--lens-state: {name} does not move (lens.{name}.joint is not set)')
@@ -316,11 +326,39 @@ def cmd_check(args: argparse.Namespace) -> int:
     return run_check(_model(args, w, h), images, _values(args), args.json, sys.stdout)
 
 
+def _one_line(err: BaseException) -> str:
+    """Return an exception's message on one line (YAML and OpenCV messages span several)."""
+    return ' '.join(part.strip() for part in str(err).splitlines() if part.strip())
+
+
+def _check_writable_image(option: str, path: Path) -> None:
+    """Refuse, before any work, an output file whose format OpenCV cannot write."""
+    import cv2
+    if not cv2.haveImageWriter(str(path)):
+        raise UsageError(f'{option}{path}: OpenCV writes no image format with the suffix '
+                         f'{path.suffix!r} (e.g. .png, .tif)')
+
+
+def _write_image(option: str, path: Path, image: np.ndarray) -> None:
+    """Write an image; a path that cannot be written is bad input (one line, status 2)."""
+    import cv2
+    try:
+        written = cv2.imwrite(str(path), image)
+    except cv2.error as err:
+        raise UsageError(f'{option}{path}: cannot write the image there ({_one_line(err)})'
+                         ) from None
+    if not written:
+        raise UsageError(f'{option}{path}: cannot write the image there')
+
+
 def _read(path: Path) -> np.ndarray:
     import cv2
     image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if image is None:
         raise UsageError(f'{path}: not a readable image')
+    if image.dtype not in REMAP_DTYPES:
+        raise UsageError(f'{path}: {image.dtype} pixels: cv2.remap corrects '
+                         + ', '.join(str(np.dtype(d)) for d in REMAP_DTYPES) + ' images')
     return image
 
 
@@ -347,7 +385,6 @@ def _demosaic(args: argparse.Namespace, path: Path, image: np.ndarray, method: s
 
 def cmd_correct(args: argparse.Namespace) -> int:
     """Correct an image file, or every image of a folder into a folder."""
-    import cv2
     from tqdm import tqdm
 
     from mechdeconv_ros.imaging.remap import Rectifier
@@ -357,9 +394,14 @@ def cmd_correct(args: argparse.Namespace) -> int:
         files = sorted(p for p in src.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
         if not files:
             raise UsageError(f'{src}: no images ({", ".join(IMAGE_SUFFIXES)})')
-        dst.mkdir(parents=True, exist_ok=True)
+        try:
+            dst.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise UsageError(f'{dst}: cannot make the output folder there: '
+                             f'{err.strerror}') from None
         pairs = [(p, dst / p.name) for p in files]
     elif src.is_file():
+        _check_writable_image('', dst)
         pairs = [(src, dst)]
     else:
         raise UsageError(f'{src}: no such file or folder')
@@ -376,16 +418,26 @@ def cmd_correct(args: argparse.Namespace) -> int:
         # colour correction; without it the colours change nothing).
         colours = BGR_COLOURS.get(image.shape[2] if image.ndim == 3 else 1)
         corrected = rectifiers[size].correct(image, colours=colours)
-        if not cv2.imwrite(str(out), corrected):
-            raise UsageError(f'{out}: cannot write the image there')
+        _write_image('', out, corrected)
     return 0
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
     """Plot the distortion curve, the displacement field and a grid before/after."""
+    from matplotlib.figure import Figure
+
     from mechdeconv_ros.tools.plots import plot_model
+    output = Path(args.output)
+    suffix = output.suffix.lower().lstrip('.')
+    formats = Figure().canvas.get_supported_filetypes()
+    if suffix not in formats:
+        raise UsageError(f'{output}: matplotlib writes no figure format with the suffix '
+                         f'{output.suffix!r} (e.g. .png, .svg, .pdf)')
     model = _model(args)
-    plot_model(model, Path(args.output))
+    try:
+        plot_model(model, output)
+    except OSError as err:
+        raise UsageError(f'{output}: cannot write the figure there: {err.strerror}') from None
     print(f'wrote {args.output}')
     return 0
 
@@ -396,17 +448,17 @@ def cmd_vignetting(args: argparse.Namespace) -> int:
 
     if not args.png and not args.lensfun:
         raise UsageError('vignetting: give --png OUT.png, --lensfun or both')
+    if args.png:
+        _check_writable_image('--png ', Path(args.png))
     model = _model(args)
     try:
         curve = model.illumination(with_fraction=False)
     except ValueError as err:
         raise UsageError(f'lens.aperture_diameter_mm: {err}') from None
     if args.png:
-        import cv2
         attenuation = raw_attenuation(model, curve)
         image = np.round(attenuation * (65535.0 / float(np.max(attenuation))))
-        if not cv2.imwrite(str(args.png), image.astype(np.uint16)):
-            raise UsageError(f'--png {args.png}: cannot write the image there')
+        _write_image('--png ', Path(args.png), image.astype(np.uint16))
         print(f'wrote {args.png} ({model.width}x{model.height} px, 16-bit, corner RI '
               f'{curve.corner_ri:.4f})')
     if args.lensfun:
@@ -538,11 +590,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     for name in ('width', 'height'):
         value = getattr(args, name, None)
         if value is not None and value <= 0:
-            parser.exit(2, f'mechdeconv: error: --{name} must be a positive number of pixels\n')
+            print(f'mechdeconv: error: --{name} must be a positive number of pixels',
+                  file=sys.stderr)
+            return 2
     try:
         return int(args.func(args))
     except (UsageError, ModelError) as err:
-        print(f'mechdeconv: error: {err}', file=sys.stderr)
+        print(f'mechdeconv: error: {_one_line(err)}', file=sys.stderr)
         return 2
     except BrokenPipeError:
         return 0
