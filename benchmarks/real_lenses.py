@@ -455,11 +455,14 @@ def run(out_dir: Path = RESULTS, quick: bool = False, docs: Path | None = DOCS,
     Skips (with a note) when lensfunpy is not installed (it is a reference-only dependency).
 
     :param out_dir: results folder.
-    :param quick: fewer field angles (the numbers then mean less).
+    :param quick: fewer field angles (the numbers then mean less); writes no docs page and
+        no params files.
     :param docs: the page to write (None: none).
     :param configs: where the passing prescriptions go as params files (None: nowhere).
     :return: the results document.
     """
+    if quick:
+        docs = configs = None
     try:
         import lensfunpy
     except ImportError:
@@ -510,7 +513,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--quick', action='store_true')
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
-    doc = run(args.out, args.quick, args.docs)
+    doc = run(args.out, args.quick, args.docs, CONFIGS)
     print('\n'.join(tables(doc)))
     return 0
 
