@@ -205,7 +205,7 @@ LENSES: tuple[RealLens, ...] = (
              f_number=2.8,
              corrections=(
                  f'd13 (stop to surface 14) {NIKKOR105_PRINTED_D13} as printed; '
-                 f'{NIKKOR105_D13} used (see docs/real_lenses.md).',)),
+                 f'{NIKKOR105_D13} used (evidence: "Corrections and checks").',)),
     RealLens('canon_rf_16', 'Canon RF 16 mm F2.8 STM', 'wide-angle',
              'JP 2022-085382 A, Example 3', DEEPLENS, RF16, 6, 4.836,
              'Canon RF 16mm F2.8 STM', 16.0, 16.0, RF16_ASPHERES, f_number=2.8),

@@ -118,7 +118,8 @@ def _sources(doc: Mapping[str, Any], page: Path) -> list[str]:
                   f'* lensfun: {_entry(r)}; other entries of the same optics: '
                   + (', '.join(s['entry'] for s in r['spread']) or 'none') + '.',
                   f"* Traced: EFL {r['efl_mm']:.3f} mm, back focus {r['back_focus_mm']:.3f} mm, "
-                  f"chief rays to {r['max_field_deg']:.1f} deg; focus at infinity."]
+                  f"chief rays traced to {r['max_field_deg']:.1f} deg (of 100 swept); focus at "
+                  'infinity.']
         lines += [f'* Correction: {c}' for c in lens.corrections]
         if lens.notes:
             lines.append(f'* Note: {lens.notes}')
@@ -135,11 +136,12 @@ def _evidence(doc: Mapping[str, Any]) -> list[str]:
         '* **AF DX Fisheye-Nikkor 10.5 mm, d13.** The transcription prints d13 (stop to '
         f"surface 14) = {d13['printed']['d13_mm']} mm. Traced with it, the lens has "
         f"EFL {d13['printed']['efl_mm']:.3f} mm and back focus "
-        f"{d13['printed']['back_focus_mm']:.3f} mm; the patent's table lists Bf = 41.1 mm "
-        "for a 10.5 mm lens, and the value also contradicts the patent's own condition (1). "
-        f"With d13 = {d13['corrected']['d13_mm']} mm: EFL {d13['corrected']['efl_mm']:.3f} mm, "
-        f"back focus {d13['corrected']['back_focus_mm']:.3f} mm (Bf 41.1 to 0.02 mm). The "
-        'corrected value is used.',
+        f"{d13['printed']['back_focus_mm']:.3f} mm, against the 10.5 mm of the product and "
+        'the 41.1 mm back focus the same table lists (its last row). With d13 = '
+        f"{d13['corrected']['d13_mm']} mm: EFL {d13['corrected']['efl_mm']:.3f} mm, back focus "
+        f"{d13['corrected']['back_focus_mm']:.3f} mm, both as listed. The corrected value is "
+        "used. (That 8.776 also contradicts the patent's condition (1) is reported with the "
+        'correction; the patent text itself was not available to check here.)',
         '* **Nikkor Z 14-30, zoom positions.** The middle and tele air gaps (D1, D2, D3, D4, '
         "Bf of Table 1) give the table's focal lengths: "
         + ', '.join(f"{p} {z['traced_mm']:.3f} mm (table {z['table_mm']:g})"
