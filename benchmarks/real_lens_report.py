@@ -97,12 +97,15 @@ def focal_table(doc: Mapping[str, Any]) -> list[str]:
             f'{ideal:.3f}', f"{(r['efl_mm'] / r['nominal_focal_mm'] - 1) * 100:+.1f} %",
             f"{r['absolute']['central']['max_pct']:.2f} %",
             f"{r['corner_deg']['ours']:.1f} / {r['corner_deg']['lensfun']:.1f}",
-            'infinity (patent)', 'not recorded by lensfun'])
+            'infinity (patent)', 'not recorded by lensfun',
+            f"{r['focus_check']['central']['max_pct']:.3f} / "
+            f"{r['focus_check']['frame']['max_pct']:.2f}"])
     return markdown_table(
         ['lens', 'traced EFL [mm]', 'nominal f', 'lensfun f', 'ideal f (normalisation)',
          'EFL vs nominal', 'central max at equal angle, lensfun f literal',
          'field angle at the frame corner [deg], ours / lensfun literal', 'focus, ours',
-         'focus, lensfun'], rows)
+         'focus, lensfun', 'ours focused at 3 m instead: change, max % central / frame'],
+        rows)
 
 
 def _sources(doc: Mapping[str, Any], page: Path) -> list[str]:
@@ -187,7 +190,10 @@ def docs_page(doc: Mapping[str, Any], out_dir: Path, page: Path) -> str:
         'not the scale). The column "at equal angle" takes lensfun\'s focal length literally '
         '(real-focal where the entry has one, else the nominal f) and compares image heights '
         'at the same field angle: what the focal-length mismatch alone would cost. Focus: '
-        'the patents tabulate infinity; lensfun records no distance for distortion.', '',
+        'the patents tabulate infinity; lensfun records no distance for distortion. The last '
+        'column bounds what focus does to the traced curve: the same prescription focused at '
+        '3 m from its front principal plane by moving the whole lens (unit focusing; these '
+        'lenses mostly focus otherwise: internal or floating groups, not modelled here).', '',
         *focal_table(doc), '',
         *_evidence(doc),
         '## Lenses, sources and figures', '',

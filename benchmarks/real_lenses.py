@@ -64,6 +64,9 @@ ASPECT = 1.5
 HALF_HEIGHT_PX = 2000.0
 #: Grid of raw-frame points the errors are taken over (a quarter frame suffices: radial).
 GRID = (121, 81)
+#: The finite focus distance (mm from H) of the focus check: how much focusing there changes
+#: the traced curve (unit focusing), against the infinity focus the patents tabulate.
+FOCUS_CHECK_MM = 3000.0
 #: A prescription passes within this much of H over the central field (or within the spread).
 PASS_PCT = 0.5
 INF = math.inf
@@ -188,21 +191,24 @@ def check_lensfun_convention(entry: Mapping[str, Any]) -> float:
 
 # ----------------------------------------------------------------------------- our side
 
-def traced(lens: RealLens, samples: int = 2001, theta_max_deg: float = 100.0
-           ) -> dict[str, Any]:
+def traced(lens: RealLens, samples: int = 2001, theta_max_deg: float = 100.0,
+           distance_mm: float = INF) -> dict[str, Any]:
     """
     Trace the chief rays of a lens at infinity: image height against field angle.
 
     :param lens: the lens.
     :param samples: field angles, uniform from 0 to ``theta_max_deg``.
     :param theta_max_deg: the largest field angle tried.
+    :param distance_mm: the scene's distance from the front principal plane; a finite one
+        is focused by moving the whole lens (unit focusing: the sensor at its image plane),
+        which is not how most of these lenses focus.
     :return: theta (rad), height (mm, NaN past the valid field), efl and the back focus.
     """
     prescription = make_prescription(lens_values(lens))
-    sensor_z, _ = image_plane(prescription, INF)
+    sensor_z, _ = image_plane(prescription, distance_mm)
     par = paraxial(prescription)
     theta = np.radians(np.linspace(0.0, theta_max_deg, samples))
-    height = -trace_field_angles(prescription, INF, sensor_z, theta)
+    height = -trace_field_angles(prescription, distance_mm, sensor_z, theta)
     bad = ~np.isfinite(height)
     if bad.any():
         height[np.argmax(bad):] = np.nan
@@ -477,6 +483,11 @@ def run(out_dir: Path = RESULTS, quick: bool = False, docs: Path | None = DOCS,
         others = [e for m in SAME_OPTICS.get(lens.lensfun_model, ())
                   for e in lensfun_entries(m, lens.lensfun_focal)]
         result = compare(lens, trace, entries, others)
+        near = traced(lens, samples=samples, distance_mm=FOCUS_CHECK_MM)
+        result['focus_check'] = errors(
+            normalised_curve(near['theta'], near['height'], result['target']),
+            result['target'], normalised_curve(trace['theta'], trace['height'],
+                                               result['target']))
         result['passes'] = passes(result)
         result['figure'] = figure(result, out_dir)
         results.append(result)
