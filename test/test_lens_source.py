@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 from mechdeconv_ros.lenses import lens_source as ls
+from mechdeconv_ros.lenses.sources import source_for
 from mechdeconv_ros.model.model import build_model
 from mechdeconv_ros.schema.params import check_values
 from mechdeconv_ros.tools.cli import format_report
@@ -51,7 +52,7 @@ class _Table(ls.LensSource):
 def test_the_values_pick_their_source_and_the_model_is_the_same_through_it(values, kind):
     """build_model with the source it would pick itself gives the same model."""
     checked = check_values(values)
-    source = ls.source_from_values(checked)
+    source = source_for(checked)
     assert type(source) is kind
     assert source.prescription is not None and source.stop_z_mm is not None
     by_values = build_model(values)

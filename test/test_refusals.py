@@ -250,8 +250,8 @@ def test_rim_and_sag_of_conics_and_aspheres():
     """The rim and sag helpers read conic and asphere terms when a surface has them."""
     from types import SimpleNamespace
 
-    from mechdeconv_ros.lenses.refusals import _sag
     from mechdeconv_ros.optics.surfaces import domain_limit_mm as _rim_mm
+    from mechdeconv_ros.optics.surfaces import sag_at_height as _sag
 
     def surface(radius, conic=0.0, asphere=()):
         return SimpleNamespace(radius_mm=radius, curvature_per_mm=1.0 / radius if radius else 0.0,

@@ -165,7 +165,7 @@ def test_pickup_glass_and_a_dummy_surface():
 
 
 def test_the_written_file_names_its_source_and_the_missing_sensor():
-    from mechdeconv_ros.lenses.lens_import import params_text
+    from mechdeconv_ros.lenses.params_file import params_text
     text = params_text(imported(SINGLET))
     assert 'lens.zmx ("test singlet")' in text and 'add sensor.pixel_size_x_um' in text
     assert text.count('/**:') == 1 and 'ros__parameters:' in text

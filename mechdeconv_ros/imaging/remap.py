@@ -42,6 +42,15 @@ import numpy.typing as npt
 _OUTSIDE = -1000.0
 
 
+def set_remap_threads(threads: int) -> None:
+    """
+    Set the threads OpenCV's remap uses (``remap_threads``).
+
+    :param threads: the count; 0 or less = OpenCV's default (every core).
+    """
+    cv2.setNumThreads(threads if threads > 0 else -1)
+
+
 def _quadrant_scale(model: LensModel, xn: npt.NDArray[np.float32],
                     yn: npt.NDArray[np.float32],
                     gain_table: npt.NDArray[np.float64] | None = None) -> Any:

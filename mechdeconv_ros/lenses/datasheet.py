@@ -43,6 +43,7 @@ from dataclasses import dataclass
 import math
 from typing import Any, Mapping, Sequence
 
+from mechdeconv_ros.lenses.lens_errors import TableError
 from mechdeconv_ros.lenses.lens_source import (
     FirstOrder, FloatArray, Illumination, LensSource, ModelError, NotApplicable)
 from mechdeconv_ros.schema.params import SPECS
@@ -59,21 +60,6 @@ CHECK_PER_INTERVAL = 64
 #: A table whose first point implies a focal length this far (relative) from
 #: ``lens.focal_length_mm`` is accepted with a warning.
 FOCAL_MISMATCH = 0.05
-
-
-class TableError(ValueError):
-    """A datasheet table that describes no lens; ``parameter`` names the parameter at fault."""
-
-    def __init__(self, parameter: str, reason: str) -> None:
-        """
-        Create the error.
-
-        :param parameter: the parameter at fault, e.g. ``'lens.datasheet.image_height_mm'``.
-        :param reason: why, without the parameter name.
-        """
-        super().__init__(f'{parameter}: {reason}')
-        self.parameter = parameter
-        self.reason = reason
 
 
 def is_table_mode(values: Mapping[str, Any]) -> bool:

@@ -22,7 +22,7 @@ import math
 from pathlib import Path
 import re
 
-from mechdeconv_ros.lenses.lens_import import Imported
+from mechdeconv_ros.lenses.params_file import Imported
 from mechdeconv_ros.lenses.zmx import decode, LensImportError
 
 _SEPARATORS = re.compile(r'[,;\s]+')
@@ -116,7 +116,7 @@ def table_values(path: str | Path, focal_length_mm: float) -> Imported:
     :param path: the CSV file.
     :param focal_length_mm: the lens's effective focal length.
     :return: values, comments and warnings for
-    :func:`mechdeconv_ros.lenses.lens_import.params_text`.
+    :func:`mechdeconv_ros.lenses.params_file.params_text`.
     :raises LensImportError: as :func:`read_table`, or for a focal length <= 0.
     """
     if not (math.isfinite(focal_length_mm) and focal_length_mm > 0.0):

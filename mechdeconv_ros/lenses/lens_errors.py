@@ -1,7 +1,7 @@
 # Copyright 2026 The mechdeconv_ros Authors.
 # SPDX-License-Identifier: Apache-2.0
 """
-What every part of the lens model shares: its error, its array type, which parameter to blame.
+What every part of the lens model shares: its errors, its array type, which parameter to blame.
 
 Pure Python, no ROS, no other module of the package: the model (:mod:`mechdeconv_ros.model.model`),
 its lens sources (:mod:`mechdeconv_ros.lenses.lens_source`), the refusal rules
@@ -36,6 +36,26 @@ class ModelError(ValueError):
         Create the error.
 
         :param parameter: the parameter at fault, e.g. ``'scene.distance_mm'``.
+        :param reason: why, without the parameter name.
+        """
+        super().__init__(f'{parameter}: {reason}')
+        self.parameter = parameter
+        self.reason = reason
+
+
+class TableError(ValueError):
+    """
+    A table that describes no lens (a datasheet's, a moving group's): ``<parameter>: <reason>``.
+
+    Raised by the table checks, which know nothing of the model; the lens source that reads
+    the table turns it into a :class:`ModelError` naming the same parameter.
+    """
+
+    def __init__(self, parameter: str, reason: str) -> None:
+        """
+        Create the error.
+
+        :param parameter: the parameter at fault, e.g. ``'lens.zoom.positions'``.
         :param reason: why, without the parameter name.
         """
         super().__init__(f'{parameter}: {reason}')

@@ -1,14 +1,17 @@
 # Copyright 2026 The mechdeconv_ros Authors.
 # SPDX-License-Identifier: Apache-2.0
 """
-Turn a lens file into this package's parameters, and write them as a ROS 2 params file.
+Turn a Zemax ``.zmx`` lens into this package's parameters: the conversion of ``mechdeconv import``.
 
 ``mechdeconv import`` runs this (no ROS). Two sources:
 
 - a Zemax ``.zmx`` file (:mod:`mechdeconv_ros.lenses.zmx` reads it) becomes a prescription
-  (``lens.surfaces.*``, docs/design.md section 2.2) at one wavelength;
+  (``lens.surfaces.*``, docs/design.md section 2.2) at one wavelength: this module;
 - a datasheet table (:mod:`mechdeconv_ros.lenses.datasheet_csv`) becomes datasheet mode
   (``lens.datasheet.*`` and ``lens.focal_length_mm``).
+
+Both give an :class:`~mechdeconv_ros.lenses.params_file.Imported`, which
+:mod:`mechdeconv_ros.lenses.params_file` writes as a ROS 2 params file.
 
 From a ``.zmx`` file, as designed:
 
@@ -31,37 +34,24 @@ From a ``.zmx`` file, as designed:
 - ``lens.image_distance_mm``: the image surface's distance from the last lens surface (the
   design's focus, not always the paraxial image).
 
-Refusals raise :class:`LensImportError` naming the file, line or surface and why; the
-params file is written to a temporary file in the target folder and renamed, so a refusal
-never leaves a partial file.
+Refusals raise :class:`LensImportError` naming the file, line or surface and why.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 import math
-import os
 from pathlib import Path
-import tempfile
-import textwrap
 from typing import Any, Callable
 
+from mechdeconv_ros.lenses.params_file import Imported
 from mechdeconv_ros.lenses.zmx import LensImportError, read, ZmxLens, ZmxSurface
-from mechdeconv_ros.optics.prescription import paraxial, Prescription, Surface
-from mechdeconv_ros.schema.params import ASPHERE_POWERS, check_values, SPECS, to_params_yaml
+from mechdeconv_ros.optics.prescription import Paraxial, paraxial, Prescription, Surface
+from mechdeconv_ros.schema.params import ASPHERE_POWERS, check_values, SPECS
 
 #: The GLAS line's nd / vd when a catalog glass carries no data of its own (Zemax writes
 #: 1.5 / 40 as a placeholder): not a usable model glass.
 PLACEHOLDER_ND_VD = (1.5, 40.0)
-
-
-@dataclass
-class Imported:
-    """Parameter values from a lens file, with the comments and warnings that go with them."""
-
-    values: dict[str, Any]
-    comments: list[str] = field(default_factory=list)
-    warnings: list[str] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -223,6 +213,26 @@ def zmx_values(lens: ZmxLens, wavelength_nm: float | None = None,
     :raises LensImportError: as :func:`resolve_medium`, or when the lens is not one this
         package can trace (e.g. afocal).
     """
+    wavelength = _wavelength(lens, wavelength_nm)
+    out = Imported(values={})
+    out.warnings += lens.notes
+    surfaces = lens.surfaces[1:-1]
+    media = _media(lens, surfaces, wavelength, resolve, out)
+    built = _built(surfaces, media)
+    para = _paraxial(lens, built)
+    _surface_values(out.values, surfaces, built, media)
+    _stop_values(lens, built, out)
+    distance = lens.object_distance_mm
+    out.values['scene.distance_mm'] = (0.0 if math.isinf(distance)
+                                       else distance + para.front_principal_z_mm)
+    _optional_values(surfaces, media, wavelength, out)
+    out.comments[:0] = _comments(lens, wavelength, para.efl_mm, distance)
+    _check(lens, out)
+    return out
+
+
+def _wavelength(lens: ZmxLens, wavelength_nm: float | None) -> float:
+    """Return the wavelength to import at (nm): the given one, else the file's primary one."""
     wavelength = float(wavelength_nm) if wavelength_nm else lens.primary_wavelength_um * 1e3
     spec = SPECS.get('lens.wavelength_nm')
     low, high = (spec.minimum, spec.maximum) if spec is not None else (200.0, 20000.0)
@@ -231,9 +241,12 @@ def zmx_values(lens: ZmxLens, wavelength_nm: float | None = None,
         raise LensImportError(f'{lens.path}: wavelength {wavelength:g} nm ({given}) is outside '
                               f'{low:g} to {high:g} nm (lens.wavelength_nm); choose one with '
                               '--wavelength-nm')
-    out = Imported(values={})
-    out.warnings += lens.notes
-    surfaces = lens.surfaces[1:-1]
+    return wavelength
+
+
+def _media(lens: ZmxLens, surfaces: list[ZmxSurface], wavelength: float, resolve: Resolver,
+           out: Imported) -> list[Medium]:
+    """Return the medium after each surface (glass pick-ups followed); image space is air."""
     media = []
     for surface in surfaces:
         medium = resolve(lens, _pickup_glass(lens, surface), wavelength)
@@ -243,20 +256,31 @@ def zmx_values(lens: ZmxLens, wavelength_nm: float | None = None,
     if media[-1].index != 1.0:
         raise LensImportError(f'{lens.path}: the image space (after surface '
                               f'{surfaces[-1].number}) is not air')
-    stop = lens.stop_number - 1
-    built = [Surface(radius_mm=0.0 if s.curvature == 0.0 else 1.0 / s.curvature,
-                     thickness_mm=float(s.thickness or 0.0) if i < len(surfaces) - 1 else 0.0,
-                     refractive_index=m.index,
-                     semi_diameter_mm=_semi_diameter(s),
-                     conic=s.conic,
-                     asphere=tuple(s.asphere[1:]))
-             for i, (s, m) in enumerate(zip(surfaces, media))]
+    return media
+
+
+def _built(surfaces: list[ZmxSurface], media: list[Medium]) -> list[Surface]:
+    """Return the prescription's surfaces (the last one's thickness 0: the image distance)."""
+    return [Surface(radius_mm=0.0 if s.curvature == 0.0 else 1.0 / s.curvature,
+                    thickness_mm=float(s.thickness or 0.0) if i < len(surfaces) - 1 else 0.0,
+                    refractive_index=m.index,
+                    semi_diameter_mm=_semi_diameter(s),
+                    conic=s.conic,
+                    asphere=tuple(s.asphere[1:]))
+            for i, (s, m) in enumerate(zip(surfaces, media))]
+
+
+def _paraxial(lens: ZmxLens, built: list[Surface]) -> Paraxial:
+    """Return the paraxial data of the surfaces; refuse a lens that has none (afocal)."""
     try:
-        probe = Prescription(tuple(built), 0.0)
-        para = paraxial(probe)
+        return paraxial(Prescription(tuple(built), 0.0))
     except ValueError as err:
         raise LensImportError(f'{lens.path}: {err}') from None
-    values = out.values
+
+
+def _surface_values(values: dict[str, Any], surfaces: list[ZmxSurface], built: list[Surface],
+                    media: list[Medium]) -> None:
+    """Set ``lens.surfaces.*`` (conic and asphere terms only where a surface has them)."""
     values['lens.surfaces.radius_mm'] = [s.radius_mm for s in built]
     values['lens.surfaces.thickness_mm'] = [float(s.thickness or 0.0) for s in surfaces]
     values['lens.surfaces.refractive_index'] = [m.index for m in media]
@@ -267,6 +291,12 @@ def zmx_values(lens: ZmxLens, wavelength_nm: float | None = None,
         terms = [s.asphere[j] for s in built]
         if any(terms):
             values[f'lens.surfaces.asphere_a{power}'] = terms
+
+
+def _stop_values(lens: ZmxLens, built: list[Surface], out: Imported) -> None:
+    """Set the stop and its diameter, narrowed to what the other semi-diameters pass."""
+    values = out.values
+    stop = lens.stop_number - 1
     values['lens.stop_surface'] = stop
     values['lens.aperture_diameter_mm'] = _aperture(lens, built, stop, out)
     largest = _largest_aperture(built, stop, lens.object_distance_mm)
@@ -277,9 +307,11 @@ def zmx_values(lens: ZmxLens, wavelength_nm: float | None = None,
                             f'through at most {largest:.6g} mm of it: '
                             'lens.aperture_diameter_mm set to that')
         values['lens.aperture_diameter_mm'] = largest
-    distance = lens.object_distance_mm
-    values['scene.distance_mm'] = (0.0 if math.isinf(distance)
-                                   else distance + para.front_principal_z_mm)
+
+
+def _optional_values(surfaces: list[ZmxSurface], media: list[Medium], wavelength: float,
+                     out: Imported) -> None:
+    """Set the wavelength, glass names and image distance (a comment where not a parameter)."""
     optional = {'lens.wavelength_nm': wavelength,
                 'lens.surfaces.glass': [m.glass for m in media],
                 'lens.image_distance_mm': float(surfaces[-1].thickness or 0.0)}
@@ -288,12 +320,9 @@ def zmx_values(lens: ZmxLens, wavelength_nm: float | None = None,
                             'lens.image_distance_mm 0 puts the sensor at the paraxial image')
     for name, value in optional.items():
         if name in SPECS:
-            values[name] = value
+            out.values[name] = value
         else:
             out.comments.append(f'{name}: {value} (not a parameter of this build)')
-    out.comments[:0] = _comments(lens, wavelength, para.efl_mm, distance)
-    _check(lens, out)
-    return out
 
 
 def _aperture(lens: ZmxLens, built: list[Surface], stop: int, out: Imported) -> float:
@@ -388,41 +417,3 @@ def import_zmx(path: str | Path, wavelength_nm: float | None = None,
     :raises LensImportError: naming the file, line or surface, for anything not imported.
     """
     return zmx_values(read(path), wavelength_nm, resolve)
-
-
-def params_text(imported: Imported) -> str:
-    """
-    Return the params file: the comments, then ``/**: ros__parameters:`` with the values.
-
-    :param imported: from :func:`import_zmx` or the datasheet reader.
-    :return: YAML text that :func:`mechdeconv_ros.schema.params.load_params_file` and rclpy load.
-    """
-    lines = []
-    for line in imported.comments + [f'warning: {w}' for w in imported.warnings]:
-        lines += textwrap.wrap(line, 97, initial_indent='# ', subsequent_indent='#   ')
-    order = [spec.name for spec in SPECS.values() if spec.name in imported.values]
-    order += [name for name in imported.values if name not in order]
-    return '\n'.join(lines) + '\n' + to_params_yaml(imported.values, names=order)
-
-
-def write_atomically(path: str | Path, text: str) -> None:
-    """
-    Write ``text`` to ``path`` through a temporary file in the same folder and a rename.
-
-    :param path: the target.
-    :param text: the content.
-    :raises LensImportError: when the folder cannot be written.
-    """
-    target = Path(path)
-    try:
-        handle, temp = tempfile.mkstemp(prefix=f'.{target.name}.', suffix='.tmp',
-                                        dir=str(target.parent.resolve()))
-    except OSError as err:
-        raise LensImportError(f'{path}: cannot write there: {err.strerror}') from None
-    try:
-        with os.fdopen(handle, 'w', encoding='utf-8') as stream:
-            stream.write(text)
-        os.replace(temp, target)
-    except OSError as err:
-        Path(temp).unlink(missing_ok=True)
-        raise LensImportError(f'{path}: cannot write there: {err.strerror}') from None

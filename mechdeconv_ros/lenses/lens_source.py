@@ -25,12 +25,12 @@ surfaces (:meth:`LensSource.check_physical`). The defaults say that these do not
 (:class:`NotApplicable`, None, no rules), so a source that knows only a table of real heights
 implements three methods.
 
-Two sources trace a prescription exactly (:mod:`mechdeconv_ros.optics.raytrace`): the paper's thick
-lens (:class:`ThickLensSource`) and a surface prescription (:class:`PrescriptionSource`), both
-built from the ``lens.*`` parameters by :func:`source_from_values`. A new source goes in its
-own module that imports only this one (every name it needs is here, :data:`__all__`), and one
-line of :func:`source_from_values` picks it (or :func:`~mechdeconv_ros.model.model.build_model`
-gets it as ``source=``).
+Two sources trace a prescription exactly (:mod:`mechdeconv_ros.optics.raytrace`): the paper's
+thick lens (:class:`ThickLensSource`) and a surface prescription (:class:`PrescriptionSource`).
+A new source goes in its own module that imports only this one (every name it needs is here,
+:data:`__all__`), and one line of :func:`mechdeconv_ros.lenses.sources.source_for` (the one
+place that picks the source of the ``lens.*`` values) picks it (or
+:func:`~mechdeconv_ros.model.model.build_model` gets it as ``source=``).
 """
 
 from __future__ import annotations
@@ -41,8 +41,7 @@ import math
 from typing import Any, Mapping
 
 from mechdeconv_ros.lenses import refusals
-from mechdeconv_ros.lenses.lens_errors import (
-    FloatArray, is_prescription_mode, lens_param, ModelError, stop_param)
+from mechdeconv_ros.lenses.lens_errors import FloatArray, lens_param, ModelError, stop_param
 from mechdeconv_ros.lenses.lens_params import (
     make_prescription, tolerance_keys, with_glass_indices, with_overrides)
 from mechdeconv_ros.lenses.sensor_plane import blur_diameter_mm, sensor_plane, SensorPlane
@@ -57,8 +56,8 @@ DEFOCUS_WARNING_PX = 2.0
 #: Everything a new source may need, importable from here.
 __all__ = [
     'FirstOrder', 'FloatArray', 'Illumination', 'LensSource', 'make_prescription', 'ModelError',
-    'NotApplicable', 'Prescription', 'PrescriptionSource', 'source_from_values', 'Surface',
-    'ThickLensSource', 'TracedSource', 'vertex_z', 'with_overrides']
+    'NotApplicable', 'Prescription', 'PrescriptionSource', 'Surface', 'ThickLensSource',
+    'TracedSource', 'vertex_z', 'with_overrides']
 
 
 class NotApplicable(ValueError):
@@ -349,24 +348,3 @@ class PrescriptionSource(TracedSource):
     """A surface prescription (``lens.surfaces.*``, stop on ``lens.stop_surface``)."""
 
     mode = 'prescription'
-
-
-def source_from_values(values: Mapping[str, Any]) -> LensSource:
-    """
-    Return the lens source the ``lens.*`` parameters describe.
-
-    :param values: checked parameter values.
-    :return: a :class:`PrescriptionSource` when ``lens.surfaces.radius_mm`` is given, else a
-        :class:`ThickLensSource` (a lens whose groups move is picked one level up:
-        :func:`mechdeconv_ros.lenses.moving_source.source_for`).
-    :raises ModelError: when the values describe no lens that focuses, or a datasheet lens
-        (``lens.datasheet.*``: :class:`mechdeconv_ros.lenses.datasheet.TableSource`, which
-        :func:`~mechdeconv_ros.model.model.build_model` picks).
-    """
-    if len(values.get('lens.datasheet.field_angle_deg', ())) > 0:
-        raise ModelError('lens.datasheet.field_angle_deg',
-                         'describes a datasheet lens: build it with '
-                         'mechdeconv_ros.lenses.datasheet.TableSource (build_model does)')
-    if is_prescription_mode(values):
-        return PrescriptionSource(values)
-    return ThickLensSource(values)

@@ -40,26 +40,12 @@ import itertools
 import math
 from typing import Any, Callable, Iterator, Mapping
 
+from mechdeconv_ros.lenses.lens_errors import TableError
 from mechdeconv_ros.schema.params import MAX_TABLE_ROWS, MECHANISMS
 import numpy as np
 
 #: A lens state: mechanism name (``'zoom'``, ``'focus'``) -> joint position.
 LensState = Mapping[str, float]
-
-
-class TableError(ValueError):
-    """A moving-group table that describes no lens: ``<parameter>: <reason>``."""
-
-    def __init__(self, parameter: str, reason: str) -> None:
-        """
-        Create the error.
-
-        :param parameter: the parameter at fault, e.g. ``'lens.zoom.positions'``.
-        :param reason: why, without the parameter name.
-        """
-        super().__init__(f'{parameter}: {reason}')
-        self.parameter = parameter
-        self.reason = reason
 
 
 @dataclass(frozen=True)

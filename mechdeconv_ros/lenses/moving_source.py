@@ -13,8 +13,8 @@ prescription; the tables themselves (shape, positions, gap indices) are checked 
 physical rules (:func:`mechdeconv_ros.lenses.refusals.check_first_order` and the surface rules) to
 every reachable state, every row and mid-row and their combinations, naming the row of a
 refusal (``lens.zoom.thickness_mm: at lens.zoom row 3 (position 0.1875) the lens cannot exist:
-...``). :func:`source_for` picks it when a ``lens.m.joint`` is set (``build_model``'s
-default source), else the seam's :func:`~mechdeconv_ros.lenses.lens_source.source_from_values`.
+...``). :func:`mechdeconv_ros.lenses.sources.source_for` picks it when a ``lens.m.joint`` is
+set.
 """
 
 from __future__ import annotations
@@ -23,9 +23,7 @@ from typing import Any, Mapping
 
 from mechdeconv_ros.lenses import lens_table
 from mechdeconv_ros.lenses import refusals
-from mechdeconv_ros.lenses.lens_source import (
-    LensSource, ModelError, PrescriptionSource, source_from_values, with_overrides)
-from mechdeconv_ros.schema.params import MECHANISMS
+from mechdeconv_ros.lenses.lens_source import ModelError, PrescriptionSource, with_overrides
 
 
 def _still_rules(values: Mapping[str, Any]) -> list[str]:
@@ -70,16 +68,3 @@ class MovingSource(PrescriptionSource):
     def perturbed(self, scalars: Mapping[str, float]) -> MovingSource:
         """Return the lens at the same state with ``scalars`` overriding its values."""
         return type(self)(with_overrides(self.table_values, scalars), self.state)
-
-
-def source_for(values: Mapping[str, Any]) -> LensSource:
-    """
-    Return the lens source of checked values: a :class:`MovingSource` when a joint moves gaps.
-
-    :param values: checked parameter values.
-    :return: the source (at the tables' first rows for a moving lens).
-    :raises ModelError: when the values describe no lens.
-    """
-    if any(values.get(f'lens.{m}.joint') for m in MECHANISMS):
-        return MovingSource(values)
-    return source_from_values(values)

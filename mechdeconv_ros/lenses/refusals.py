@@ -16,8 +16,9 @@ The rules, their formulas and limits are listed in docs/design.md section 7. Two
   ``t - sag1(a) + sag2(a) >= 0``, and the warnings for a far stop and f/0.7 or faster.
 
 The sagitta of a surface at height a is ``c a^2 / (1 + sqrt(1 - (1 + k) c^2 a^2))`` plus the
-even asphere terms (:func:`_sag`); a paraxial ray is transferred by ``y += d (n u) / n`` and
-refracted by ``n u -= (n' - n) c y`` (:func:`_paraxial_height`).
+even asphere terms (:func:`mechdeconv_ros.optics.surfaces.sag_at_height`); a paraxial ray is
+transferred by ``y += d (n u) / n`` and refracted by ``n u -= (n' - n) c y``
+(:func:`_paraxial_height`).
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from mechdeconv_ros.lenses.lens_errors import (
     FloatArray, is_prescription_mode, ModelError, scene_distance, stop_param)
 from mechdeconv_ros.optics import scene_constraints
 from mechdeconv_ros.optics.prescription import Prescription, Surface, vertex_z
-from mechdeconv_ros.optics.surfaces import domain_limit_mm, is_spherical
+from mechdeconv_ros.optics.surfaces import domain_limit_mm, is_spherical, sag_at_height
 
 
 #: f-numbers below this are accepted with a warning (few production lenses are faster).
@@ -38,28 +39,6 @@ FAST_F_NUMBER = 0.7
 FAR_STOP_FOCAL_LENGTHS = 1.0
 #: Relative slack of the aperture and edge-thickness limits (rounding of given values).
 LIMIT_SLACK = 1e-9
-
-
-def _sag(surface: Surface, height_mm: float) -> float:
-    """
-    Return the sagitta of a surface at height ``a``: ``c a^2 / (1 + sqrt(1 - (1 + k) c^2 a^2))``.
-
-    For a sphere that is ``r - sign(r) sqrt(r^2 - a^2)``; even asphere terms ``a4 a^4 + ...``
-    are added. Beyond its rim (:func:`~mechdeconv_ros.optics.surfaces.domain_limit_mm`) a surface
-    is continued by a flat bevel, so the sagitta stays at its rim value there. (Scalar, and
-    clamped at the rim where :func:`mechdeconv_ros.optics.surfaces.sag` would round to NaN.)
-    """
-    c = surface.curvature_per_mm
-    k = surface.conic
-    a = min(abs(height_mm), domain_limit_mm(surface))
-    out = c * a * a / (1.0 + math.sqrt(max(0.0, 1.0 - (1.0 + k) * c * c * a * a)))
-    for power, coefficient in enumerate(surface.asphere, start=2):
-        out += float(coefficient) * a ** (2 * power)
-    return out
-
-
-#: The sagitta of a surface at a height, clamped at its rim (public for the sensor plane).
-sag_mm = _sag
 
 
 def _shape(surface: Surface) -> str:
@@ -172,8 +151,8 @@ def _edge_crossing(surfaces: tuple[Surface, ...], z_vertices: FloatArray, elemen
     semi_aperture = max(max(heights[i] * d_a / 2.0 for i in element),
                         max(surfaces[i].semi_diameter_mm for i in element))
     for i, j in zip(element[:-1], element[1:]):
-        edge = (float(z_vertices[j]) + _sag(surfaces[j], semi_aperture)
-                - float(z_vertices[i]) - _sag(surfaces[i], semi_aperture))
+        edge = (float(z_vertices[j]) + sag_at_height(surfaces[j], semi_aperture)
+                - float(z_vertices[i]) - sag_at_height(surfaces[i], semi_aperture))
         if edge < -LIMIT_SLACK * max(1.0, semi_aperture):
             return i, j, edge, semi_aperture
     return None

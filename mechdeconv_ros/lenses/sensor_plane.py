@@ -40,9 +40,9 @@ from dataclasses import dataclass
 import math
 
 from mechdeconv_ros.lenses.lens_errors import ModelError
-from mechdeconv_ros.lenses.refusals import sag_mm
 from mechdeconv_ros.optics.prescription import (
     image_plane, paraxial_matrix, Prescription, surfaces_before, vertex_z)
+from mechdeconv_ros.optics.surfaces import sag_at_height
 
 PARAMETER = 'lens.image_distance_mm'
 
@@ -168,7 +168,7 @@ def sensor_plane(prescription: Prescription, distance: float, front_principal_z:
         # No clear semi-diameter given: the axial beam's height there bounds the glass used.
         semi = 0.5 * blur_diameter_mm(prescription, distance, front_principal_z, z_last,
                                       stop_diameter_mm)
-    bulge = sag_mm(last, semi) if math.isfinite(semi) else 0.0
+    bulge = sag_at_height(last, semi) if math.isfinite(semi) else 0.0
     if image_distance_mm <= bulge:
         raise ModelError(PARAMETER, f'{image_distance_mm:g} mm puts the sensor inside the last '
                                     f'surface, which bulges {bulge:.4g} mm behind its vertex at '

@@ -51,11 +51,10 @@ import math
 from typing import Any, Mapping
 
 from mechdeconv_ros.lenses import refusals
-from mechdeconv_ros.lenses.datasheet import is_table_mode, TableSource
 from mechdeconv_ros.lenses.lens_errors import FloatArray, half_diagonal_mm, ModelError
 from mechdeconv_ros.lenses.lens_params import make_prescription
 from mechdeconv_ros.lenses.lens_source import LensSource
-from mechdeconv_ros.lenses.moving_source import source_for
+from mechdeconv_ros.lenses.sources import source_for
 from mechdeconv_ros.model import lateral_color
 from mechdeconv_ros.model.camera_info_fit import (
     boundary_points, choose_equivalent, EQUIVALENT_MAX_ERROR_PX, EquivalentFit, fit_equivalent)
@@ -347,8 +346,7 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
     :param width: the incoming image width, used when ``sensor.width_px`` is 0.
     :param height: the incoming image height, used when ``sensor.height_px`` is 0.
     :param source: the lens; by default the one the ``lens.*`` values describe
-        (:func:`mechdeconv_ros.lenses.moving_source.source_for`: the seam's
-        ``source_from_values``, or a moving prescription when a ``lens.m.joint`` is set).
+        (:func:`mechdeconv_ros.lenses.sources.source_for`).
     :return: the model.
     :raises ModelError: naming the parameter at fault when the values describe no camera.
     """
@@ -358,8 +356,7 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
         name = str(err).split(':', 1)[0].split('[', 1)[0].strip(" '")
         raise ModelError(name, str(err).split(':', 1)[-1].strip()) from None
     if source is None:
-        # A datasheet table, a lens whose groups move, else the traced lens of the lens.* values.
-        source = TableSource(vals) if is_table_mode(vals) else source_for(vals)
+        source = source_for(vals)
     # The rules of every source (paraxial), then the ones on its surfaces (docs/design.md s. 7).
     f, distance, sensor_z, v = refusals.check_first_order(vals, source)
     lateral_color.check_switch(vals)

@@ -15,16 +15,16 @@ header; Bayer input is demosaiced first, by ``debayer``, and published as rgb8 /
 
 Wiring only: :mod:`~mechdeconv_ros.node.ros_params` declares the schema,
 :mod:`~mechdeconv_ros.node.param_services` hardens the set services,
-:class:`~mechdeconv_ros.imaging.live_model.LiveModel` holds values, validation, the rebuild thread,
-the atomic swap and frame-size following (its docstring: which thread touches what), and
-:mod:`~mechdeconv_ros.node.node_main` runs it until a signal. The node spins in a
-SingleThreadedExecutor (on 2 vCPUs the MultiThreadedExecutor's wait loop cost 640x480 output
-30 -> 5 fps); the frames have their own mutually exclusive callback group. Lazy subscription
-follows the outputs' publisher matched events (with the shipped Fast DDS profile within 1 ms
-of a remote subscription's creation or removal); an rmw without them is polled every
-:data:`LAZY_POLL_S`.
+:class:`~mechdeconv_ros.imaging.live_model.LiveModel` holds values, validation, the rebuild
+thread, the atomic swap and frame-size following (its docstring: which thread touches what),
+:class:`~mechdeconv_ros.imaging.model_maps.ModelMaps` decides how each model's maps are built
+(static, moving, colour, gain) and what is logged about them, :mod:`~mechdeconv_ros.node.topics`
+creates the outputs and the lazy input subscription (polled every :data:`LAZY_POLL_S` on an rmw
+without matched events), and :mod:`~mechdeconv_ros.node.node_main` runs it until a signal. The
+node spins in a SingleThreadedExecutor (on 2 vCPUs the MultiThreadedExecutor's wait loop cost
+640x480 output 30 -> 5 fps); the frames have their own mutually exclusive callback group.
 
-Frame path (``_on_image`` / ``_on_compressed`` -> ``_on_frame`` -> ``_correct``; executor
+Frame path (``image_raw`` or its ``/compressed`` -> ``_on_frame`` -> ``_correct``; executor
 thread only, one frame at a time), in order, with the stage names of the stage clock
 (:mod:`~mechdeconv_ros.node.stage_clock`, ``MECHDECONV_STAGE_TIMES``; ``make bench`` times each):
 
@@ -54,34 +54,28 @@ from __future__ import annotations
 import time
 from typing import Any, Callable
 
-import cv2
-from diagnostic_msgs.msg import DiagnosticArray
 from mechdeconv_ros.imaging.debayer import Demosaicer
 from mechdeconv_ros.imaging.live_model import (  # noqa: F401 - MAX_SURFACES: the node's limit
     changes_of, FrameDropped, LiveModel, MAX_SURFACES)
-from mechdeconv_ros.imaging.moving_maps import is_moving, moving_rectifier, MovingRectifier
-from mechdeconv_ros.imaging.remap import Rectifier
+from mechdeconv_ros.imaging.model_maps import ModelMaps
+from mechdeconv_ros.imaging.moving_maps import MovingRectifier
+from mechdeconv_ros.imaging.remap import set_remap_threads
 from mechdeconv_ros.model.lateral_color import COLOUR_ORDER
-from mechdeconv_ros.model.model import build_model
 from mechdeconv_ros.node.diagnostics import diagnostics_message, FrameStats
 from mechdeconv_ros.node.frame_input import (
-    compressed_output, COMPRESSED_PARAMS, compressed_settings, demosaic_frame, FrameRefused,
-    read_compressed, read_image, sensor_qos)
+    compressed_output, COMPRESSED_PARAMS, compressed_settings, demosaic_frame, FrameRefused)
 from mechdeconv_ros.node.image_msgs import camera_infos_from_model, Encoding, OutputImagePool
 from mechdeconv_ros.node.lens_follower import LensFollower
 from mechdeconv_ros.node.node_main import log_function, run_node
 from mechdeconv_ros.node.param_services import guard_parameter_services
 from mechdeconv_ros.node.ros_params import declare_schema
 from mechdeconv_ros.node.stage_clock import stage_clock_from_env, StageClock
+from mechdeconv_ros.node.topics import create_outputs, LazyInput
 from mechdeconv_ros.schema.params import SCHEMA
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.event_handler import PublisherEventCallbacks, UnsupportedEventTypeError
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos_overriding_options import QoSOverridingOptions
-from rclpy.subscription import Subscription
-from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
 #: Seconds between checks of the output subscriber counts, only on an rmw without matched events.
 LAZY_POLL_S = 0.5
@@ -105,54 +99,28 @@ class CorrectNode(Node):
         self._live: LiveModel | None = None
         self._stats = FrameStats()
         self._pool = OutputImagePool()
-        self._subscription: Subscription | None = None
-        self._logged: dict[str, float] = {}         # kind of error -> time last logged, s
-        self._channels = 1          # of the last frame: the rebuild prepares its gain map
-        self._depth_gain_noted = False
         self._demosaicer = Demosaicer()     # Bayer input (issue #20)
-        # Lateral colour (issue #20): the channel colours of the last frame (the rebuild
-        # folds its maps for them) and the encodings already told that they ignore it.
-        self._colours: tuple[int, ...] | None = None
-        self._colourless_noted: set[str] = set()
-        self._lateral_logged: Any = None
-        self._warned_model: Any = None
-        self._moving_cache: MovingRectifier | None = None
         self._compressed_wanted = False     # image_rect/compressed has a subscriber
         self._stage_clock = stage_clock_from_env()    # None unless MECHDECONV_STAGE_TIMES is set
         super().__init__('correct_node', **kwargs)
+        # How each model's maps are built (static, moving, colour, gain) and logged.
+        self._maps = ModelMaps(log_function(self))
         self._live = LiveModel(
             declare_schema(self, SCHEMA), extras=camera_infos_from_model, log=log_function(self),
-            build_maps=self._build_maps)
+            build_maps=self._maps.build)
         # Issue 19: lens_state (JointState) while a lens.zoom/focus joint moves gaps.
         self._follower = LensFollower(self, self._stats)
         self._follower.configure(self._live.values())
         guard_parameter_services(self, self._live.start_requested_rebuild,
                                  bool(kwargs.get('allow_undeclared_parameters', False)))
-        self._apply_threads()
+        set_remap_threads(int(self._live.value('remap_threads')))
         self._compressed_settings = compressed_settings(self._live.value)
         self._debayer = str(self._live.value('debayer'))    # read on set, not per frame
         self._stats.image_transport = str(self._live.value('image_transport'))
-        self._stats.input_topic = self.resolve_topic_name('image_raw') + (
-            '/compressed' if self._stats.image_transport == 'compressed' else '')
-        self._frame_group = MutuallyExclusiveCallbackGroup()
-        # Probe for matched events on /diagnostics: it has no QoS override parameters, which
-        # a second try at creating an output would declare twice.
-        try:
-            self._pub_diag = self.create_publisher(
-                DiagnosticArray, '/diagnostics', 10,
-                event_callbacks=PublisherEventCallbacks(matched=lambda info: None))
-            events = PublisherEventCallbacks(matched=lambda info: self._update_subscription())
-        except UnsupportedEventTypeError:
-            self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-            events = None
-        self._outputs = tuple(
-            self.create_publisher(msg_type, topic, sensor_qos(), event_callbacks=events,
-                                  qos_overriding_options=QoSOverridingOptions.
-                                  with_default_policies())
-            for msg_type, topic in ((Image, 'image_rect'), (CameraInfo, 'camera_info'),
-                                    (CameraInfo, 'camera_info_rect'),
-                                    (CompressedImage,
-                                     self.resolve_topic_name('image_rect') + '/compressed')))
+        self._input = LazyInput(self, self._stats.image_transport, self._on_frame,
+                                MutuallyExclusiveCallbackGroup(), self._frame_error)
+        self._stats.input_topic = self._input.topic
+        self._pub_diag, self._outputs, events = create_outputs(self, self._update_subscription)
         self._pub_image, self._pub_info, self._pub_info_rect, self._pub_compressed = \
             self._outputs
         self._rebuild_trigger = self.create_guard_condition(self._live.start_requested_rebuild)
@@ -160,7 +128,7 @@ class CorrectNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.add_post_set_parameters_callback(self._post_set_parameters)
         self._update_subscription()
-        if events is None:
+        if not events:
             self.create_timer(LAZY_POLL_S, self._update_subscription)
         self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
         lazy = 'lazy subscription' if self._live.value('lazy_subscription') else 'subscribed'
@@ -186,7 +154,7 @@ class CorrectNode(Node):
         # The hardened services start it after the request; this covers other sets.
         self._rebuild_trigger.trigger()
         if 'remap_threads' in changed:
-            self._apply_threads()
+            set_remap_threads(int(self._live.value('remap_threads')))
         if 'lazy_subscription' in changed:
             self._update_subscription()
         if any(name.startswith(('lens.zoom.', 'lens.focus.')) for name in changed):
@@ -196,76 +164,12 @@ class CorrectNode(Node):
         if 'debayer' in changed:
             self._debayer = str(self._live.value('debayer'))
 
-    def _build_maps(self, model: Any) -> Rectifier:
-        """
-        Build the remap tables and, with ``output.vignetting_correction``, the gain map.
-
-        Runs in the rebuild thread (or in the executor for a new frame size); the gain map is
-        replicated here for the channel count of the last frame, so the first frame after
-        the swap does not pay for it. A gain limit that ends the corrected field inside the
-        image is logged once per model. Threads: ``_channels`` is written by the executor only
-        (one int, read here as a hint); ``_warned_model`` only suppresses a repeated log line,
-        so a race between the two callers at worst logs it twice.
-        """
-        if is_moving(model):
-            return self._moving_maps(model)
-        rectifier = Rectifier(model)
-        if rectifier.colour is not None:   # lateral colour (issue #20)
-            rectifier.prepare_colours(self._colours)
-            if model is not self._lateral_logged:
-                self._lateral_logged = model
-                traces = model.lateral_color()
-                self.get_logger().info(
-                    f'output.lateral_color_correction: R, G, B traced at '
-                    f"{', '.join(f'{ch.wavelength_nm:g}' for ch in traces.channels)} nm and "
-                    f'mapped in {rectifier.lateral_color_ms:.1f} ms (traces '
-                    f'{traces.trace_ms:.1f} ms); largest R-B separation on the raw image '
-                    f'{traces.max_rb_separation_px:.3g} px')
-        if rectifier.gain is not None:
-            rectifier.gain_for(self._channels)
-            # (A new frame size builds a model's maps again: warn once per model.)
-            if rectifier.vignetting_warning and model is not self._warned_model:
-                self._warned_model = model
-                self.get_logger().warning(rectifier.vignetting_warning)
-        return rectifier
-
-    def _moving_maps(self, model: Any) -> MovingRectifier:
-        """
-        Build the grid of a moving lens (issue 19; seconds: one model per grid state).
-
-        Same threads as ``_build_maps``; a second request for the model in use gets the grid
-        it has (``_moving_cache``: one reference, swapped whole).
-        """
-        cached = self._moving_cache
-        if cached is not None and cached.model is model:
-            return cached
-        start = time.perf_counter()
-        rectifier = moving_rectifier(model, build_model)
-        grid = rectifier.grid
-        self.get_logger().info(
-            f'moving lens: {len(grid.cameras)} lens states precomputed in '
-            f'{time.perf_counter() - start:.1f} s, {grid.memory_bytes / 1e6:.1f} MB '
-            f'(+ {grid.frame_map_bytes / 1e6:.1f} MB per-frame map)')
-        if rectifier.vignetting_warning:
-            self.get_logger().warning(rectifier.vignetting_warning)
-        self._moving_cache = rectifier
-        return rectifier
-
-    def _apply_threads(self) -> None:
-        threads = int(self._live.value('remap_threads'))
-        cv2.setNumThreads(threads if threads > 0 else -1)
-
-    def _on_image(self, msg: Image) -> None:
-        """Correct one raw frame and publish it with both CameraInfos; never raises."""
-        self._on_frame(msg, read_image)
-
-    def _on_compressed(self, msg: CompressedImage) -> None:
-        """Decode one compressed frame, then correct and publish it; never raises."""
-        self._on_frame(msg, read_compressed)
-
     def _on_frame(self, msg: Any, read: Callable[[Any, FrameStats], Any]) -> None:
         """
-        Run the frame path (executor thread only; see the module docstring, "Frame path").
+        Run the frame path of a message (executor thread only; module docstring, "Frame path").
+
+        The input subscription (:class:`~mechdeconv_ros.node.topics.LazyInput`) calls it with
+        the message's reader (a compressed frame is decoded there); it never raises.
 
         Each ``clock`` test is one ``is None`` when the stage clock is off (the default).
         """
@@ -332,20 +236,9 @@ class CorrectNode(Node):
             self._pub_info_rect.publish(info_rect)
             if clock is not None:
                 clock.mark('publish_info_rect')
-            self._channels = 1 if pixels.ndim == 2 else int(pixels.shape[2])
-            self._colours = colours
-            if active.rectifier.colour is not None and colours is None and \
-                    encoding.name not in self._colourless_noted:
-                self._colourless_noted.add(encoding.name)
-                self.get_logger().info(
-                    f'output.lateral_color_correction: {encoding.name} has no known colour '
-                    'channels; it is corrected with the one map of the model')
-            if encoding.depth and active.rectifier.gain is not None and \
-                    not self._depth_gain_noted:
-                self._depth_gain_noted = True
-                self.get_logger().info(
-                    f'output.vignetting_correction: {encoding.name} is a depth encoding; '
-                    'depth images are remapped but never gain-corrected')
+            self._maps.frame_done(active.rectifier, encoding.name,
+                                  1 if pixels.ndim == 2 else int(pixels.shape[2]), colours,
+                                  bool(encoding.depth))
             if clock is not None:
                 clock.mark('bookkeeping')
             if self._compressed_wanted:
@@ -366,39 +259,18 @@ class CorrectNode(Node):
 
     def _frame_error(self, kind: str, error: str, line: str = '') -> None:
         """Record a problem for diagnostics; log it at most every LOG_THROTTLE_S per kind."""
-        # (rclpy's throttle_duration_sec is per call site: one site would mute other kinds.)
-        self._stats.last_error = error
-        now = time.monotonic()
-        if now - self._logged.get(kind, -LOG_THROTTLE_S) >= LOG_THROTTLE_S:
-            self._logged[kind] = now
+        if self._stats.record_error(kind, error, LOG_THROTTLE_S):
             self.get_logger().error(line or error)
 
     def _update_subscription(self) -> None:
         """Subscribe to image_raw while it is needed (lazy), unsubscribe when it is not."""
         self._compressed_wanted = self._pub_compressed.get_subscription_count() > 0
-        lazy = bool(self._live.value('lazy_subscription'))
-        wanted = not lazy or any(pub.get_subscription_count() > 0 for pub in self._outputs)
-        if wanted and self._subscription is None:
-            topic = self._stats.input_topic
-            compressed = self._stats.image_transport == 'compressed'
-            try:
-                self._subscription = self.create_subscription(
-                    CompressedImage if compressed else Image, topic,
-                    self._on_compressed if compressed else self._on_image, sensor_qos(),
-                    callback_group=self._frame_group,
-                    qos_overriding_options=QoSOverridingOptions.with_default_policies())
-            except Exception as err:    # noqa: B902 - e.g. a bad qos_overrides value
-                return self._frame_error('subscribe', f'cannot subscribe to {topic}: {err}')
-            self.get_logger().debug(f'subscribed to {topic}')
-        elif not wanted and self._subscription is not None:
-            self.destroy_subscription(self._subscription)
-            self._subscription = None
-            self.get_logger().debug('no subscriber on the outputs: unsubscribed from image_raw')
+        self._input.update(bool(self._live.value('lazy_subscription')), self._outputs)
 
     def _publish_diagnostics(self) -> None:
         try:
             self._pub_diag.publish(diagnostics_message(
-                self, self._live.status(), self._stats, self._subscription is not None))
+                self, self._live.status(), self._stats, self._input.subscription is not None))
         except Exception as err:        # noqa: B902 - diagnostics must not stop the node
             self.get_logger().error(f'diagnostics failed: {err!r}',
                                     throttle_duration_sec=LOG_THROTTLE_S)

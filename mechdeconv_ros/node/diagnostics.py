@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 from typing import Any, Iterable, Mapping
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -56,6 +57,25 @@ class FrameStats:
         self.decode_count = 0           # since the last diagnostics message
         #: More entries for /diagnostics (the lens_state input's, lens_follower.py).
         self.extra: dict[str, Any] = {}
+        self._logged: dict[str, float] = {}     # kind of error -> time last logged, s
+
+    def record_error(self, kind: str, error: str, throttle_s: float) -> bool:
+        """
+        Keep a frame problem as ``last_error``; return whether to log it (throttled per kind).
+
+        (rclpy's ``throttle_duration_sec`` is per call site: one site would mute other kinds.)
+
+        :param kind: the kind of problem (``'size'``, ``'correction'``, ...).
+        :param error: what went wrong.
+        :param throttle_s: least seconds between two log lines of one kind.
+        :return: True when this kind was not logged in the last ``throttle_s``.
+        """
+        self.last_error = error
+        now = time.monotonic()
+        if now - self._logged.get(kind, -throttle_s) >= throttle_s:
+            self._logged[kind] = now
+            return True
+        return False
 
     def add_decode_time(self, ms: float) -> None:
         """Record the decoding time of one compressed frame."""

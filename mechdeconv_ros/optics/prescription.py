@@ -355,27 +355,6 @@ def image_plane(prescription: Prescription, object_distance_mm: float) -> tuple[
     return par.rear_principal_z_mm + image_distance, image_distance
 
 
-def refract(dy: np.ndarray, dz: np.ndarray, normal_y: np.ndarray, normal_z: np.ndarray,
-            n_before: float, n_after: float) -> tuple[np.ndarray, np.ndarray]:
-    """
-    Refract unit meridional directions at a surface with unit normals (vector Snell law).
-
-    The normal points into the second medium (its z component is > 0). The tangential
-    component n sin(i) = n (k x N) is preserved exactly. See :func:`surfaces.refract`.
-
-    :param dy: direction y components.
-    :param dz: direction z components.
-    :param normal_y: normal y components.
-    :param normal_z: normal z components.
-    :param n_before: refractive index before the surface.
-    :param n_after: refractive index after the surface.
-    :return: refracted (dy, dz); NaN where the ray is totally internally reflected or hits the
-        surface from behind (k . N <= 0).
-    """
-    _, ky, kz = surfaces.refract(0.0, dy, dz, 0.0, normal_y, normal_z, n_before, n_after)
-    return ky, kz
-
-
 def _nan_where(bad: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
     return tuple(np.where(bad, np.nan, a) for a in arrays)
 

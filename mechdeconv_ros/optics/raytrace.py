@@ -37,20 +37,14 @@ import math
 
 from mechdeconv_ros.optics.prescription import (
     AFOCAL_POWER_PER_MM, BACKWARD_TOLERANCE_MM, check_distance, finite_number, image_plane,
-    Paraxial, paraxial, paraxial_matrix, Prescription, Rays, refract, Surface, surfaces_before,
+    Paraxial, paraxial, paraxial_matrix, Prescription, Rays, Surface, surfaces_before,
     trace_surfaces, transfer_to_plane, vertex_z)
 import numpy as np
 
 #: What callers import from here (the prescription names are re-exported).
 __all__ = [
     'AFOCAL_POWER_PER_MM', 'BACKWARD_TOLERANCE_MM', 'finite_number', 'image_plane', 'paraxial',
-    'Paraxial', 'Prescription', 'Rays', 'refract', 'Surface', 'trace_surfaces',
-    'transfer_to_plane', 'vertex_z',
-    'aim_chief_rays', 'radial_map', 'trace_chief_rays', 'trace_field', 'trace_field_angles']
-
-__all__ = [
-    'AFOCAL_POWER_PER_MM', 'BACKWARD_TOLERANCE_MM', 'finite_number', 'image_plane', 'paraxial',
-    'Paraxial', 'Prescription', 'Rays', 'refract', 'Surface', 'trace_surfaces',
+    'Paraxial', 'Prescription', 'Rays', 'Surface', 'trace_surfaces',
     'transfer_to_plane', 'vertex_z',
     'aim_chief_rays', 'radial_map', 'trace_chief_rays', 'trace_field', 'trace_field_angles']
 

@@ -135,13 +135,36 @@ def _sag_and_slope(surface: SurfaceShape, u: np.ndarray) -> tuple[np.ndarray, np
         return _sag_and_slope_quiet(surface, u)
 
 
-def _sag_and_slope_quiet(surface: SurfaceShape,
-                         u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Return the sag and dz/du; the caller holds ``np.errstate(**_ERRSTATE)``."""
+def sag_at_height(surface: SurfaceShape, height_mm: float) -> float:
+    """
+    Return the sag at a height, continued beyond the rim by a flat bevel (scalar).
+
+    Beyond its rim (:func:`domain_limit_mm`) a surface is continued by a flat bevel, so the
+    sag stays at its rim value there; at the rim itself the square root of the sag is clamped
+    at 0 where :func:`sag` would round to NaN. What the refusals and the sensor plane need
+    (edge thicknesses, the last surface's bulge).
+
+    :param surface: the surface (curvature, conic, asphere).
+    :param height_mm: the height a (its sign is ignored), mm.
+    :return: z in mm, vertex-local.
+    """
+    a = min(abs(height_mm), domain_limit_mm(surface))
+    with np.errstate(**_ERRSTATE):
+        return float(_sag_and_slope_quiet(surface, np.asarray(a * a, dtype=float), rim=True)[0])
+
+
+def _sag_and_slope_quiet(surface: SurfaceShape, u: np.ndarray,
+                         rim: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Return the sag and dz/du; the caller holds ``np.errstate(**_ERRSTATE)``.
+
+    ``rim``: clamp the square root's argument at 0 (a height at the rim, rounded past it).
+    """
     c = surface.curvature_per_mm
     q = 1.0 + surface.conic
     # NaN outside the domain; an array even for 0-d input (np.divide writes into it).
-    root = np.asarray(np.sqrt(1.0 - (q * c * c) * u))
+    argument = 1.0 - (q * c * c) * u
+    root = np.asarray(np.sqrt(np.maximum(argument, 0.0) if rim else argument))
     z = c * u / (1.0 + root)
     dz = np.divide(0.5 * c, root, out=root)
     poly = _poly(surface)

@@ -31,8 +31,9 @@ from pathlib import Path
 import sys
 from typing import Any, Sequence
 
+from mechdeconv_ros.lenses.lens_source import LensSource
 from mechdeconv_ros.lenses.lens_table import mechanisms, parse_lens_state
-from mechdeconv_ros.lenses.moving_source import MovingSource
+from mechdeconv_ros.lenses.sources import source_for
 from mechdeconv_ros.model.model import build_model, camera_info_yaml, LensModel, ModelError
 from mechdeconv_ros.schema.params import BAYER_PATTERNS, check_values, load_params_file, SPECS
 import numpy as np
@@ -83,7 +84,7 @@ def _model(args: argparse.Namespace, width: int = 0, height: int = 0) -> LensMod
     return model
 
 
-def _moving_source(args: argparse.Namespace, values: dict[str, Any]) -> MovingSource | None:
+def _moving_source(args: argparse.Namespace, values: dict[str, Any]) -> LensSource | None:
     """Return the lens at ``--lens-state`` (None without the option: the default source)."""
     text = getattr(args, 'lens_state', None)
     if not text:
@@ -101,7 +102,7 @@ def _moving_source(args: argparse.Namespace, values: dict[str, Any]) -> MovingSo
             _warn_once(args, [f'lens.{name}: joint position {position:g} is outside '
                               f'lens.{name}.positions ({mech.positions[0]:g} to '
                               f'{mech.positions[-1]:g}): the nearest row is used'])
-    return MovingSource(values, state)
+    return source_for(values, state)
 
 
 def _warn_once(args: argparse.Namespace, warnings: Sequence[str]) -> None:
@@ -345,7 +346,8 @@ def cmd_vignetting(args: argparse.Namespace) -> int:
 
 def cmd_import(args: argparse.Namespace) -> int:
     """Import a .zmx lens file or a datasheet CSV table into a params file."""
-    from mechdeconv_ros.lenses.lens_import import import_zmx, params_text, write_atomically
+    from mechdeconv_ros.lenses.lens_import import import_zmx
+    from mechdeconv_ros.lenses.params_file import params_text, write_atomically
     from mechdeconv_ros.lenses.zmx import LensImportError
 
     source = Path(args.lens)

@@ -53,11 +53,10 @@ from mechdeconv_ros.node.process_env import Child
 from mechdeconv_ros.tools.demo_report import (
     DemoError, diagnostics_lines, lens_change, measure, newest_rect, say, stamp_ns, stop_children,
     summary_image, to_bgr, wait_for, write_png)
+from mechdeconv_ros.tools.demo_sweep import sweep_scenario
 
 #: Seconds to wait for the first corrected frame after starting the processes.
 STARTUP_TIMEOUT_S = 30.0
-#: A moving lens (issue 19): the node and the camera first build their grids of lens states.
-MOVING_STARTUP_TIMEOUT_S = 180.0
 
 
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
@@ -157,17 +156,17 @@ def run(args: argparse.Namespace, children: list[Child]) -> int:
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
-    from mechdeconv_ros.tools.demo_monitor import Monitor
+    from mechdeconv_ros.tools.demo_monitor import Monitor, spin
 
     rclpy.init(args=[], domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
     monitor = Monitor(args.transport)
     executor = SingleThreadedExecutor()
     executor.add_node(monitor)
-    spinner = threading.Thread(target=_spin, args=(executor,), name='demo-spin', daemon=True)
+    spinner = threading.Thread(target=spin, args=(executor,), name='demo-spin', daemon=True)
     spinner.start()
     try:
         if moving:
-            return zoom_scenario(args, children, monitor, before, params_file, out)
+            return sweep_scenario(args, children, monitor, before, params_file, out)
         return scenario(args, children, monitor, (before, after, change, change_text),
                         params_file, out)
     finally:
@@ -175,17 +174,6 @@ def run(args: argparse.Namespace, children: list[Child]) -> int:
         monitor.destroy_node()
         rclpy.try_shutdown()
         spinner.join(timeout=2.0)
-
-
-def _spin(executor: Any) -> None:
-    from rclpy.executors import ExternalShutdownException
-    try:
-        executor.spin()
-    except (ExternalShutdownException, KeyboardInterrupt):
-        pass
-    except Exception as err:    # noqa: B902 - a context shut down under the executor
-        if 'shutdown' not in str(err).lower():
-            raise
 
 
 def scenario(args: argparse.Namespace, children: list[Child], monitor: Any,
@@ -255,67 +243,6 @@ def scenario(args: argparse.Namespace, children: list[Child], monitor: Any,
     measure(monitor, args.seconds, 'new lens', args.rate, children)
     print(diagnostics_lines(monitor.diag, monitor.diag_message), flush=True)
 
-    stop_children(children)
-    say(f'done: see {out}/summary.png')
-    return 0
-
-
-def zoom_scenario(args: argparse.Namespace, children: list[Child], monitor: Any, model: Any,
-                  params_file: Path, out: Path) -> int:
-    """Tell the moving lens's story (issue 19): the camera sweeps, each frame corrected."""
-    import numpy as np
-
-    from mechdeconv_ros.lenses.moving_source import MovingSource
-    from mechdeconv_ros.model.model import build_model
-    from mechdeconv_ros.tools.cli import format_report
-    from mechdeconv_ros.tools.demo_report import caption
-
-    joints = ', '.join(f'lens.{m.name}.joint {m.joint!r} ({m.positions[0]:g} to '
-                       f'{m.positions[-1]:g})' for m in model.source.moving)
-    say(f'the lens moves: {joints}; demo_camera sweeps it and publishes lens_state with each '
-        'frame, correct_node corrects each frame at the state of its stamp')
-    say('waiting for the first corrected frame (both first build their grid of lens states) ...')
-    wait_for(lambda: monitor.last_rect is not None, MOVING_STARTUP_TIMEOUT_S,
-             'corrected frame on image_rect', children)
-    say('first corrected frame received')
-    print(f'\nmodel at the first rows ({params_file.name}, {model.width}x{model.height}):\n  '
-          + format_report(model.report()).replace('\n', '\n  '), flush=True)
-    wait_for(lambda: bool(monitor.diag.get('lens_grid_states')), 10.0,
-             'diagnostics of the moving lens', children)
-    print(diagnostics_lines(monitor.diag, monitor.diag_message), flush=True)
-    measure(monitor, args.seconds, 'lens sweeping', args.rate, children)
-    frames = []
-    for _ in range(2):
-        # The pair of one stamp: the camera renders each frame at the state it publishes.
-        rect = newest_rect(monitor)
-        stamp = stamp_ns(rect.header.stamp)
-        raw = monitor.grab_raw(5.0)
-        while stamp_ns(raw.header.stamp) < stamp:
-            raw = monitor.grab_raw(5.0)
-        joints = monitor.lens_state_at(stamp_ns(raw.header.stamp)) or {}
-        state = {m.name: float(joints.get(m.joint, m.positions[0]))
-                 for m in model.source.moving}
-        rect = next((r for r in monitor.recent_rects() if
-                     stamp_ns(r.header.stamp) == stamp_ns(raw.header.stamp)), None)
-        if rect is None:        # its correction did not arrive (best effort): the newest
-            rect = newest_rect(monitor)
-        at = build_model(model.values, model.width, model.height,
-                         source=MovingSource(model.source.table_values, state))
-        text = ', '.join(f'{k} = {v:.3f}' for k, v in state.items())
-        frames.append((to_bgr(raw), to_bgr(rect),
-                       f'{text}, f = {at.focal_length_mm:.1f} mm, max displacement '
-                       f'{at.max_displacement_px:.1f} px'))
-        say('  lens state ' + text +
-            f", lens_state_lag_ms {monitor.diag.get('lens_state_lag_ms')}, "
-            f"lens_states_ignored {monitor.diag.get('lens_states_ignored')}")
-        time.sleep(1.3)
-    for i, (raw, corrected, _) in enumerate(frames):
-        write_png(out / f'raw_{i}.png', raw)
-        write_png(out / f'corrected_{i}.png', corrected)
-    write_png(out / 'summary.png', np.vstack([
-        np.hstack([caption(raw, f'image_raw: {text}'),
-                   caption(corrected, 'image_rect at the lens state of its stamp')])
-        for raw, corrected, text in frames]))
     stop_children(children)
     say(f'done: see {out}/summary.png')
     return 0

@@ -175,3 +175,15 @@ class Monitor(Node):
         future.add_done_callback(lambda _: replied.append(time.monotonic()))
         wait_for(lambda: bool(replied), timeout_s, f'the reply of /{node}')
         return future.result().result, sent, replied[0]
+
+
+def spin(executor: Any) -> None:
+    """Spin an executor until it or its context shuts down (the demo's spin thread)."""
+    from rclpy.executors import ExternalShutdownException
+    try:
+        executor.spin()
+    except (ExternalShutdownException, KeyboardInterrupt):
+        pass
+    except Exception as err:    # noqa: B902 - a context shut down under the executor
+        if 'shutdown' not in str(err).lower():
+            raise
