@@ -224,3 +224,47 @@ def test_colour_benchmark_quick(tmp_path):
     assert doc['rebuild']['trace_ms'] > 0
     assert doc['rebuild']['max_rb_separation_px'] == pytest.approx(4.11, abs=0.02)   # at 1080p
     assert any('map per channel' in line for line in colour.tables(doc))
+
+
+def test_real_lenses_model_conventions():
+    """The lensfun models as the real-lens benchmark evaluates them, without lensfunpy."""
+    from benchmarks import real_lenses as rl
+    ru = np.linspace(0.0, 1.8, 37)
+    ptlens = {'distortion': 'ptlens', 'terms': [0.01, -0.03, 0.02], 'type': 'rectilinear',
+              'half_height_mm': 12.0, 'focal': 50.0, 'real_focal': None}
+    poly3 = dict(ptlens, distortion='poly3', terms=[-0.005, 0.0, 0.0])
+    # ptlens and poly3 keep r = 1 in place (their normalisation); poly5 keeps the slope at 0.
+    assert rl.lensfun_rd(ptlens, np.array([1.0]))[0] == pytest.approx(1.0)
+    assert rl.lensfun_rd(poly3, np.array([1.0]))[0] == pytest.approx(1.0)
+    poly5 = dict(ptlens, distortion='poly5', terms=[-0.01, 0.002, 0.0])
+    assert rl.lensfun_rd(poly5, np.array([1e-6]))[0] == pytest.approx(1e-6, rel=1e-9)
+    assert np.all(np.diff(rl.lensfun_rd(ptlens, ru)) > 0)
+    # A distortion-free lens of any focal length is the identity in normalised coordinates.
+    theta = np.radians(np.linspace(0.0, 70.0, 701))
+    x, rd, f = rl.normalised_curve(theta, 37.0 * np.tan(theta), ptlens)
+    assert f == pytest.approx(37.0, rel=1e-3)
+    assert_allclose(rd[np.isfinite(x)], x[np.isfinite(x)], atol=1e-4)
+    # The entry against itself: no error; a known offset shows up as itself.
+    own = rl.normalised_curve(theta, rl.entry_height(ptlens, theta), ptlens)
+    same = rl.errors(own, ptlens, own)
+    assert same['frame']['max_px'] < 0.05 and same['covered'] == 1.0
+    pinhole = rl.errors((own[0], own[0]), ptlens, own)
+    raw = np.linspace(0.0, 1.8, 181)
+    ideal = np.interp(raw, own[1][np.isfinite(own[1])], own[0][np.isfinite(own[1])])
+    assert pinhole['frame']['max_pct'] == pytest.approx(
+        np.max(np.abs(ideal - raw)) * 100, rel=0.02)
+
+
+def test_real_lenses_quick(tmp_path):
+    """The real-lens benchmark runs (or says why not: lensfunpy is reference-only)."""
+    from benchmarks import real_lenses
+    doc = real_lenses.run(tmp_path, quick=True)
+    lines = real_lenses.tables(doc)
+    if not doc['lenses']:
+        assert 'lensfunpy' in doc['skipped'] and 'Skipped' in ' '.join(lines)
+        return
+    assert len(doc['lenses']) >= 8
+    assert (tmp_path / 'real_lenses.json').exists()
+    kinds = {'fisheye', 'wide-angle', 'normal', 'short tele', 'zoom'}
+    assert {r['category'] for r in doc['lenses']} >= kinds
+    assert doc['evidence']['lensfun_check_px'] < 0.1  # of 2000 px: float32, pixel centres
