@@ -133,14 +133,16 @@ def strategy_and_accuracy(width: int, height: int, frames: int, reps: int) -> di
     history = LensStateHistory({'zoom': zoom.joint})
     period_ns = int(1e9 / STATE_RATE_HZ)
     frame_ns = [int(i * 1e9 / RATE_HZ) for i in range(frames)]
-    for t in range(0, frame_ns[-1] + period_ns, period_ns):
-        history.add(t, [zoom.joint], [sweep(t * 1e-9)])
-    for t in frame_ns:
-        history.add(t, [zoom.joint], [sweep(t * 1e-9)])
+    # In time order, as they arrive: a sample far older than the newest is a jump back in time
+    # (a rosbag loop), which clears the history.
+    # Stamps start at 1 s: a stamp of 0 means "unstamped" (the newest state).
+    t0 = 1_000_000_000
+    for t in sorted({*range(0, frame_ns[-1] + period_ns, period_ns), *frame_ns}):
+        history.add(t0 + t, [zoom.joint], [sweep(t * 1e-9)])
     rows = []
     for t in tqdm(frame_ns, desc='zoom accuracy', unit='frame'):
         true = sweep(t * 1e-9)
-        used = history.at(t).positions['zoom']
+        used = history.at(t0 + t).positions['zoom']
         _, full = grid.at({'zoom': used})
         exact = build_model(values_at(values, {'zoom': true}))
         mx, my = build_float_maps(exact)

@@ -207,7 +207,7 @@ def test_launch_arguments_reach_the_node_and_a_second_sigint_is_harmless(
 
 def test_the_real_launch_description_declares_what_the_content_test_checks(
         prefix: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """launch itself reads the arguments test_launch_file.py checks by parsing the file."""
+    """The launch package reads the arguments that test_launch_file.py checks by parsing."""
     import importlib.util
 
     from mechdeconv_ros.schema.params import IMAGE_TRANSPORTS
