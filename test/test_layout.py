@@ -231,3 +231,10 @@ def test_the_layout_rows_import_only_rows_above_them():
         above = set(order[:order.index(short(name))])
         below = sorted(short(m) for m in graph[name] if short(m) not in above)
         assert not below, f'{short(name)}.py imports {below}, listed after it in section 6'
+
+
+@pytest.mark.parametrize('path', ['node/correct_node.py', 'tools/demo.py'])
+def test_the_node_and_the_demo_stay_thin(path):
+    """The ROS wiring stays wiring: map policy and logging live in the ROS-free layers."""
+    lines = len((REPO / 'mechdeconv_ros' / path).read_text().splitlines())
+    assert lines <= 300, f'{path} has {lines} lines (at most 300)'

@@ -20,9 +20,10 @@ thread, the atomic swap and frame-size following (its docstring: which thread to
 :class:`~mechdeconv_ros.imaging.model_maps.ModelMaps` decides how each model's maps are built
 (static, moving, colour, gain) and what is logged about them, :mod:`~mechdeconv_ros.node.topics`
 creates the outputs and the lazy input subscription (polled every :data:`LAZY_POLL_S` on an rmw
-without matched events), and :mod:`~mechdeconv_ros.node.node_main` runs it until a signal. The
-node spins in a SingleThreadedExecutor (on 2 vCPUs the MultiThreadedExecutor's wait loop cost
-640x480 output 30 -> 5 fps); the frames have their own mutually exclusive callback group.
+without matched events), :mod:`~mechdeconv_ros.node.check_thread` checks a copy of a frame
+for straight edges (at most ``check.rate_hz``), and :mod:`~mechdeconv_ros.node.node_main` runs
+it until a signal. A SingleThreadedExecutor (on 2 vCPUs the MultiThreadedExecutor's wait loop
+cost 640x480 output 30 -> 5 fps); the frames have their own mutually exclusive callback group.
 
 Frame path (``image_raw`` or its ``/compressed`` -> ``_on_frame`` -> ``_correct``; executor
 thread only, one frame at a time), in order, with the stage names of the stage clock
@@ -62,7 +63,7 @@ from mechdeconv_ros.imaging.moving_maps import MovingRectifier
 from mechdeconv_ros.imaging.remap import set_remap_threads
 from mechdeconv_ros.model.lateral_color import COLOUR_ORDER
 from mechdeconv_ros.node.check_thread import CheckThread
-from mechdeconv_ros.node.diagnostics import diagnostics_message, FrameStats
+from mechdeconv_ros.node.diagnostics import FrameStats, publish_diagnostics
 from mechdeconv_ros.node.frame_input import (
     compressed_output, COMPRESSED_PARAMS, compressed_settings, demosaic_frame, FrameRefused)
 from mechdeconv_ros.node.image_msgs import camera_infos_from_model, Encoding, OutputImagePool
@@ -93,8 +94,7 @@ class CorrectNode(Node):
         """
         Declare the parameters, validate them, create the topics and start the rebuild thread.
 
-        :param kwargs: forwarded to :class:`rclpy.node.Node` (``context``,
-            ``parameter_overrides``, ``cli_args``, ...).
+        :param kwargs: forwarded to :class:`rclpy.node.Node` (``context``, ``cli_args``, ...).
         :raises ValueError: when the start-up parameters are invalid (the message names them).
         """
         self._live: LiveModel | None = None
@@ -124,7 +124,10 @@ class CorrectNode(Node):
         self._pub_diag, self._outputs, events = create_outputs(self, self._update_subscription)
         self._pub_image, self._pub_info, self._pub_info_rect, self._pub_compressed = \
             self._outputs
-        self._check = CheckThread(self, self._live.value, self._active_model, self._set_check)
+        # The check reads the model frames use now; its result is rebound whole (diagnostics).
+        self._check = CheckThread(
+            self, self._live.value, lambda: getattr(self._live.status().active, 'model', None),
+            lambda entries: setattr(self._stats, 'check', entries))
         self._check.start()
         self._rebuild_trigger = self.create_guard_condition(self._live.start_requested_rebuild)
         self._live.start()
@@ -133,7 +136,9 @@ class CorrectNode(Node):
         self._update_subscription()
         if not events:
             self.create_timer(LAZY_POLL_S, self._update_subscription)
-        self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
+        self.create_timer(DIAGNOSTICS_PERIOD_S, lambda: publish_diagnostics(
+            self, self._pub_diag, self._live, self._stats,
+            lambda: self._input.subscription is not None, LOG_THROTTLE_S))
         lazy = 'lazy subscription' if self._live.value('lazy_subscription') else 'subscribed'
         self.get_logger().info(f'ready: f = {self._live.startup_model.focal_length_mm:.4g} mm, '
                                f'{lazy} to {self._stats.input_topic}')
@@ -262,14 +267,6 @@ class CorrectNode(Node):
         if clock is not None:
             clock.mark('bookkeeping')
 
-    def _active_model(self) -> Any:
-        """Return the model frames are corrected with now (None before the first frame)."""
-        active = self._live.status().active
-        return None if active is None else active.model
-
-    def _set_check(self, entries: dict[str, Any]) -> None:
-        self._stats.check = entries     # one rebinding: the diagnostics timer reads it whole
-
     def _frame_error(self, kind: str, error: str, line: str = '') -> None:
         """Record a problem for diagnostics; log it at most every LOG_THROTTLE_S per kind."""
         if self._stats.record_error(kind, error, LOG_THROTTLE_S):
@@ -280,20 +277,11 @@ class CorrectNode(Node):
         self._compressed_wanted = self._pub_compressed.get_subscription_count() > 0
         self._input.update(bool(self._live.value('lazy_subscription')), self._outputs)
 
-    def _publish_diagnostics(self) -> None:
-        try:
-            self._pub_diag.publish(diagnostics_message(
-                self, self._live.status(), self._stats, self._input.subscription is not None))
-        except Exception as err:        # noqa: B902 - diagnostics must not stop the node
-            self.get_logger().error(f'diagnostics failed: {err!r}',
-                                    throttle_duration_sec=LOG_THROTTLE_S)
-
     def destroy_node(self) -> None:
-        """Stop the rebuild thread, then destroy the node."""
-        if getattr(self, '_check', None) is not None:
-            self._check.stop()
-        if self._live is not None:
-            self._live.stop()
+        """Stop the check and rebuild threads, then destroy the node."""
+        for worker in (getattr(self, '_check', None), self._live):   # None: start-up failed
+            if worker is not None:
+                worker.stop()
         if self._stage_clock is not None:
             self._stage_clock.dump()
         super().destroy_node()

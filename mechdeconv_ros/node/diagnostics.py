@@ -24,7 +24,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from typing import Any, Iterable, Mapping
+from typing import Any, Callable, Iterable, Mapping
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from mechdeconv_ros.imaging.live_model import LiveStatus
@@ -113,6 +113,24 @@ class FrameStats:
 def status_name(node: Node) -> str:
     """Return the DiagnosticStatus name of a node: its fully qualified name + the task."""
     return f'{node.get_fully_qualified_name()}: lens correction'
+
+
+def publish_diagnostics(node: Node, publisher: Any, live: Any, stats: FrameStats,
+                        subscribed: Callable[[], bool], throttle_s: float) -> None:
+    """
+    Publish the node's diagnostics now (its 1 Hz timer); never raises.
+
+    :param node: the node (its name, clock and logger).
+    :param publisher: the ``/diagnostics`` publisher.
+    :param live: the live model (its :meth:`status` is read once).
+    :param stats: the frame counters.
+    :param subscribed: whether the node is subscribed to image_raw now.
+    :param throttle_s: the least time between two logged failures.
+    """
+    try:
+        publisher.publish(diagnostics_message(node, live.status(), stats, subscribed()))
+    except Exception as err:        # noqa: B902 - diagnostics must not stop the node
+        node.get_logger().error(f'diagnostics failed: {err!r}', throttle_duration_sec=throttle_s)
 
 
 def diagnostics_message(node: Node, live: LiveStatus, stats: FrameStats,
