@@ -23,13 +23,8 @@ import numpy.typing as npt
 FloatArray = npt.NDArray[np.float64]
 
 
-class ModelError(ValueError):
-    """
-    A parameter set that describes no usable camera.
-
-    ``parameter`` names the parameter at fault; ``str(err)`` starts with it and says why in
-    words a person understands.
-    """
+class ParameterError(ValueError):
+    """``<parameter>: <reason>``: the parameter at fault and why (base of the two below)."""
 
     def __init__(self, parameter: str, reason: str) -> None:
         """
@@ -43,24 +38,22 @@ class ModelError(ValueError):
         self.reason = reason
 
 
-class TableError(ValueError):
+class ModelError(ParameterError):
+    """
+    A parameter set that describes no usable camera.
+
+    ``parameter`` names the parameter at fault; ``str(err)`` starts with it and says why in
+    words a person understands.
+    """
+
+
+class TableError(ParameterError):
     """
     A table that describes no lens (a datasheet's, a moving group's): ``<parameter>: <reason>``.
 
     Raised by the table checks, which know nothing of the model; the lens source that reads
     the table turns it into a :class:`ModelError` naming the same parameter.
     """
-
-    def __init__(self, parameter: str, reason: str) -> None:
-        """
-        Create the error.
-
-        :param parameter: the parameter at fault, e.g. ``'lens.zoom.positions'``.
-        :param reason: why, without the parameter name.
-        """
-        super().__init__(f'{parameter}: {reason}')
-        self.parameter = parameter
-        self.reason = reason
 
 
 def is_prescription_mode(values: Mapping[str, Any]) -> bool:
