@@ -27,8 +27,11 @@ $(STAMP): requirements.txt requirements-test.txt setup.py setup.cfg package.xml
 	  ln -sf ../lib/mechdeconv_ros/$$exe $(VENV)/bin/$$exe; done
 	touch $(STAMP)
 
+# One worker per CPU (at most 4), each test file whole on one worker: its module fixtures (a
+# node started once for a file's tests) are not started twice. Serial: make test XDIST=.
+XDIST ?= --numprocesses=auto --maxprocesses=4 --dist=loadfile
 test: $(STAMP)
-	$(PY) -m pytest test
+	$(PY) -m pytest $(XDIST) test
 
 demo: $(STAMP)
 	$(PY) -m mechdeconv_ros.tools.demo $(DEMO_ARGS)

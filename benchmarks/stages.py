@@ -300,7 +300,7 @@ def measure_rung(probe: Probe, rung: str, width: int, height: int, env: Mapping[
     window = [f for f in stage_frames if f['stamp_ns'] in received]
     stages: dict[str, float] = {}
     for stage in STAGES:
-        if stage == 'out_hop':
+        if stage == 'out_hop':     # may be < 0: the probe can wake before publish() returns
             values = [(received[f['stamp_ns']] - f['image_out_ns']) * 1e-6
                       for f in window if 'image_out_ns' in f]
         else:

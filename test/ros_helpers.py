@@ -5,10 +5,11 @@ Helpers for the tests that run real ROS 2 processes (no mocks).
 
 * :func:`next_domain_id` gives every node launch of a test run its own ``ROS_DOMAIN_ID``
   (the tests' range of :data:`mechdeconv_ros.node.process_env.DOMAIN_RANGES`, pid-derived, so
-  parallel runs on one machine do not see each other), and :func:`ros_env` the environment
-  for it (:func:`mechdeconv_ros.node.process_env.graph_env`: discovery limited to localhost and the
-  package's Fast DDS profile, whose big shared-memory segment lets large best-effort frames
-  arrive).
+  parallel runs on one machine do not see each other; under pytest-xdist each worker takes
+  the ids of its own residue class, so two workers of one run never share a domain), and
+  :func:`ros_env` the environment for it (:func:`mechdeconv_ros.node.process_env.graph_env`:
+  discovery limited to localhost and the package's Fast DDS profile, whose big shared-memory
+  segment lets large best-effort frames arrive).
 * :class:`NodeProcess` is :class:`mechdeconv_ros.node.process_env.Child` with ``<name>.out`` and
   ``<name>.err`` logs: a node in its own process group, stopped with SIGINT to the group
   (escalating to SIGTERM, SIGKILL), returning the exit code; its context manager kills the
@@ -23,6 +24,7 @@ from __future__ import annotations
 import array
 import contextlib
 import itertools
+import os
 from pathlib import Path
 import signal
 import sys
@@ -58,7 +60,17 @@ def next_domain_id() -> int:
 
     :return: the domain id, in the tests' range (1-100).
     """
-    return process_env.pick_domain_id('tests', next(_domain_counter))
+    first, last = process_env.DOMAIN_RANGES['tests']
+    size = last - first + 1
+    # pytest-xdist names its workers gw0, gw1, ... (PYTEST_XDIST_WORKER) and says how many
+    # there are: worker k of n takes the ids first + k, first + k + n, ... only.
+    worker = os.environ.get('PYTEST_XDIST_WORKER', 'gw0')[2:]
+    workers = int(os.environ.get('PYTEST_XDIST_WORKER_COUNT', '1'))
+    slots = size // workers
+    index = int(worker) + workers * ((os.getpid() * 7 + next(_domain_counter)) % slots)
+    if str(first + index) == os.environ.get('ROS_DOMAIN_ID'):    # never the user's own domain
+        index = (index + workers) % (slots * workers)
+    return first + index
 
 
 def ros_env(domain_id: int, extra: dict[str, str] | None = None) -> dict[str, str]:

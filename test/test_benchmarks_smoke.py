@@ -14,6 +14,7 @@ with code 0, frames arrive, a parameter set reaches the frames).
 from __future__ import annotations
 
 import json
+import math
 
 from benchmarks import accuracy, node_latency, report, run_all, speed
 import numpy as np
@@ -161,9 +162,12 @@ def test_stages_quick(tmp_path):
     assert all(r['fps'] > 5.0 and r['stage_frames'] > 0 for r in doc['runs']), doc['runs']
     assert 'remap' not in by_rung['relay']['stages']
     node = by_rung['node']['stages']
-    for stage in ('receive', 'read', 'model', 'remap', 'publish_image', 'out_hop',
-                  'publish_info', 'publish_info_rect', 'bookkeeping'):
+    for stage in ('receive', 'read', 'model', 'remap', 'publish_image', 'publish_info',
+                  'publish_info_rect', 'bookkeeping'):
         assert node[stage] >= 0.0, stage
+    # The out hop is the probe's receive time minus the node's time after publish() returned:
+    # over shared memory the probe can wake before that, so it may be slightly negative.
+    assert math.isfinite(node['out_hop']) and node['out_hop'] > -100.0
     assert by_rung['node']['cpu_ms_per_frame']['main'] >= 0.0
     assert (tmp_path / 'stages.json').exists()
     text = '\n'.join(stages.tables(doc))

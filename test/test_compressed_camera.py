@@ -11,7 +11,6 @@ The demo's ``--transport compressed`` runs the whole compressed path end to end.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 import re
 import subprocess
@@ -32,7 +31,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
-from ros_helpers import REPO
+from ros_helpers import next_domain_id, REPO
 from sensor_msgs.msg import CompressedImage
 
 pytestmark = pytest.mark.ros
@@ -44,7 +43,7 @@ CASE2 = REPO / 'config' / 'case2.yaml'
 def context() -> Iterator[Context]:
     """Give each test its own rclpy Context on a private domain."""
     ctx = Context()
-    rclpy.init(context=ctx, domain_id=1 + (os.getpid() * 17 + 5) % 100)
+    rclpy.init(context=ctx, domain_id=next_domain_id())
     try:
         yield ctx
     finally:

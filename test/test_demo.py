@@ -28,7 +28,6 @@ import cv2
 from mechdeconv_ros.imaging.remap import Rectifier
 from mechdeconv_ros.model.model import build_model, LensModel
 from mechdeconv_ros.node.image_msgs import image_to_array
-from mechdeconv_ros.node.process_env import pick_domain_id
 from mechdeconv_ros.schema.params import load_params_file
 from mechdeconv_ros.tools.demo_camera import Chart, convert_rgb, DemoCamera
 import numpy as np
@@ -40,6 +39,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
+from ros_helpers import next_domain_id
 from sensor_msgs.msg import Image
 
 REPO = Path(__file__).resolve().parents[1]
@@ -234,7 +234,7 @@ def _is_zombie(pid: int) -> bool:
 def context() -> Iterator[Context]:
     """Give each camera test its own rclpy Context on a private domain."""
     ctx = Context()
-    rclpy.init(context=ctx, domain_id=pick_domain_id('tests', 500))
+    rclpy.init(context=ctx, domain_id=next_domain_id())
     try:
         yield ctx
     finally:

@@ -12,6 +12,13 @@ launch forwards one more (always with ``--noninteractive``), which used to inter
 shutdown (exit code -2). Should shutdown hang, a third SIGINT, or a SIGTERM after the first
 signal (launch sends one after its timeout), stops the process the default way. The signal
 path touches nothing but the flag: the main thread then destroys the node.
+
+The GIL switch interval is :data:`GIL_SWITCH_S` while the node runs (Python's default is
+5 ms). The node's background threads (model rebuild, summary, check) run pure-Python optics
+that hold the GIL; each time the frame path gives the GIL up (rcl take, cv2.remap, publish) it
+waits up to one interval to get it back. Measured on a 2-vCPU machine with a summary thread
+looping beside a 1280x960 remap: frame p50 2.8 ms alone, 12.7 ms (p99 28.8) at 5 ms, 7.8 ms
+(p99 11.4) at 0.5 ms. With no background thread busy nothing changes.
 """
 
 from __future__ import annotations
@@ -29,6 +36,8 @@ from rclpy.signals import SignalHandlerOptions
 
 #: Longest wait of the spin loop before it looks at the stop flag, s.
 STOP_POLL_S = 0.1
+#: The GIL switch interval while a node runs, s (see the module docstring).
+GIL_SWITCH_S = 0.0005
 
 
 def run_node(factory: Callable[[], Node], name: str, args: list[str] | None = None) -> None:
@@ -41,6 +50,8 @@ def run_node(factory: Callable[[], Node], name: str, args: list[str] | None = No
     :param args: command-line arguments for rclpy (``--ros-args ...``); default ``sys.argv``.
     """
     keep_large_buffers()
+    switch_interval = sys.getswitchinterval()
+    sys.setswitchinterval(GIL_SWITCH_S)
     stop = threading.Event()
 
     def request_stop(signum: int, frame: Any) -> None:
@@ -75,6 +86,7 @@ def run_node(factory: Callable[[], Node], name: str, args: list[str] | None = No
         rclpy.try_shutdown()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+        sys.setswitchinterval(switch_interval)
     if failed:
         sys.exit(1)
 
