@@ -174,6 +174,12 @@ class Link:
                 msg_type, topic, self._store(kind), self.qos))
         assert self.client.spin_until(lambda: self.pub.get_subscription_count() > 0, 10.0), \
             'the node did not subscribe to image_raw'
+        # And the node's publishers matched these new readers: a frame published before
+        # discovery reaches them is lost for them (volatile), which a loaded machine makes
+        # likely for the first frame after subscribing.
+        assert self.client.spin_until(
+            lambda: all(sub.get_publisher_count() > 0 for sub in self._subs), 10.0), \
+            "the node's outputs did not match this client's readers"
 
     def unsubscribe_outputs(self) -> None:
         """Destroy the output subscriptions."""
