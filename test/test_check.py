@@ -7,7 +7,9 @@ Frames: test/check_scenes.py (optiland's chief-ray heights of config/wide_angle.
 config/fisheye.yaml, a spline of the test's own, analytic anti-aliasing; no package code) of
 planar grids at several angles and a box room, seen by a sensor whose axis is off by
 ``OFFSET_PX``. The description is checked with the true offset (the rendering floor) and
-with the nominal (centred) one.
+with the nominal (centred) one. A box room seen by a sensor both off the axis and tilted by
+``TILT_DEG`` (optiland's chief-ray lines: test/data/optiland_chief_slopes.json) is checked
+the same way; the renderer's tilted sensor is tied to the package's ``project`` first.
 
 Measured (docs/design.md section 2.17): the floor is 0.100 px RMS (wide-angle, pinhole
 output) and 0.11 px (fisheye, equidistant output, px at its centre scale); the renders are
