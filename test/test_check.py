@@ -198,6 +198,23 @@ def tilted_values(name: str, offset_px: tuple[float, float],
     return vals
 
 
+def test_the_chief_slopes_reference_is_the_curves_lines() -> None:
+    # test/data/optiland_chief_slopes.json: the same rays as the height curve, and lines
+    # (optiland's own intersections 0.05 mm before and after the image plane lie on them).
+    lines = json.loads((REPO / 'test/data/optiland_chief_slopes.json').read_text())['lenses']
+    curves = json.loads((REPO / 'test/data/optiland_wide_reference.json').read_text())['lenses']
+    for key in ('wide_angle_160', 'fisheye_170'):
+        line, curve = lines[key], curves[key]['curve']
+        h, s = np.array(line['height_mm']), np.array(line['slope'])
+        assert np.allclose(line['field_angle_deg'], curve['field_angle_deg'], rtol=0, atol=1e-12)
+        assert np.allclose(h, curve['real_height_abs_mm'], rtol=0, atol=1e-12)
+        step = line['plane_step_mm']
+        assert np.allclose(h - s * step, line['height_minus_mm'], rtol=0, atol=1e-12)
+        assert np.allclose(h + s * step, line['height_plus_mm'], rtol=0, atol=1e-12)
+        # The rays leave the axis as they travel on (s > 0 off axis): a tilt moves them.
+        assert s[0] == 0.0 and np.all(s[1:] > 0.0)
+
+
 @pytest.fixture(scope='module', params=['wide', 'fisheye'])
 def tilted(request: pytest.FixtureRequest) -> dict:
     """Check a tilted, decentred sensor's frame with the true and the nominal descriptions."""
@@ -265,5 +282,7 @@ def test_a_tilted_sensor_with_the_nominal_description(tilted: dict) -> None:
                 or est['sigma'] > est['tolerance']), (key, est)
         if est['sigma'] > est['tolerance']:
             assert est['value'] == 0.0 and key not in to_apply(result, values(name))
-    assert result.straightness_rms_px_after <= 1.5 * BOX_FLOOR_PX
+    # Within 1.5 x this scene's floor (the true description's straightness, measured here):
+    # measured 0.030 of 0.033 px (wide-angle) and 0.055 of 0.054 px (fisheye).
+    assert result.straightness_rms_px_after <= 1.5 * tilted['true'].straightness_rms_px
     assert result.straightness_rms_px_after < result.straightness_rms_px
