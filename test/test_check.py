@@ -245,7 +245,7 @@ def test_the_tilted_renderer_meets_project(tilted: dict) -> None:
         # Every direction of the design field projects (the package's field of the fisheye
         # ends at 87.8 deg, optiland's curve at 102 deg).
         assert np.all(np.isfinite(errors[-1][theta[inside] < np.radians(85.0)]))
-    assert np.nanmax(errors[0]) < 0.01       # measured 3e-4 px (wide), 5e-7 px (fisheye)
+    assert np.nanmax(errors[0]) < 0.01       # measured 3e-4 px (wide), 7e-6 px (fisheye)
     # Rendered untilted, the same pixels are off by more than a pixel: the test sees the tilt.
     assert np.nanmax(errors[1]) > 1.0
 
