@@ -32,7 +32,6 @@ optiland is a reference-only dependency (requirements-reference.txt); run::
 from __future__ import annotations
 
 import argparse
-import datetime
 import importlib.util
 import json
 from pathlib import Path
@@ -52,9 +51,10 @@ PLANE_STEP_MM = 0.05
 HEIGHT_AGREEMENT_MM = 1e-9
 
 
-def _load(name: str) -> Any:
-    path = REPO / 'tools' / f'{name}.py'
-    spec = importlib.util.spec_from_file_location(name, path)
+def _assembly_tool() -> Any:
+    """Return tools/make_optiland_assembly.py as a module (it loads its sibling tools)."""
+    spec = importlib.util.spec_from_file_location(
+        'make_optiland_assembly', REPO / 'tools' / 'make_optiland_assembly.py')
     module = importlib.util.module_from_spec(spec)
     assert spec.loader is not None
     spec.loader.exec_module(module)
@@ -138,8 +138,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     import warnings
     warnings.filterwarnings('ignore')
-    ref = _load('make_optiland_reference')
-    asm = _load('make_optiland_assembly')
+    asm = _assembly_tool()
+    ref = asm._load('make_optiland_reference')
     reference = json.loads(WIDE_REFERENCE.read_text())['lenses']
     start = time.monotonic()
     lenses = {}
@@ -149,11 +149,7 @@ def main(argv: list[str] | None = None) -> int:
               f'{len(lenses[key]["field_angle_deg"])} chief rays, slope at the edge '
               f'{lenses[key]["slope"][-1]:.4f}', file=sys.stderr, flush=True)
     doc = {
-        'provenance': {
-            'generator': 'tools/make_optiland_chief_slopes.py',
-            'date_utc': datetime.datetime.now(datetime.timezone.utc).strftime(
-                '%Y-%m-%dT%H:%M:%SZ'),
-            'versions': ref.versions(), 'runtime_s': round(time.monotonic() - start, 1)},
+        'provenance': asm.provenance(ref, 'tools/make_optiland_chief_slopes.py', start),
         'conventions': {
             'field_angle_deg': 'the chief ray of this field angle (scene at infinity), the '
                                f'angles of {WIDE_REFERENCE.name} curve',
