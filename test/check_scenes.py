@@ -200,9 +200,9 @@ def _px_dist(coord: np.ndarray, period: float, half: float) -> np.ndarray:
 
 
 def grid(lens: Lens, offset_px: tuple[float, float], yaw: float, pitch: float,
-         roll: float, circles: bool = False, tilt_deg: tuple[float, float] = (0.0, 0.0)
-         ) -> np.ndarray:
-    """Render a bounded grid of bars (or discs) on a plane; return an 8-bit raw frame."""
+         roll: float, circles: bool = False, tilt_deg: tuple[float, float] = (0.0, 0.0),
+         half_width: float = 0.08) -> np.ndarray:
+    """Render a bounded grid of bars (half-width of the 0.55 period) or discs; 8-bit frame."""
     d = lens.frame(offset_px, tilt_deg)
     s, t, hit = _plane_coords(d, _rot(yaw, pitch, roll), 1.0)
     img = np.full(d.shape[:-1], 0.35)
@@ -219,8 +219,11 @@ def grid(lens: Lens, offset_px: tuple[float, float], yaw: float, pitch: float,
             cover = np.clip(0.5 + (0.3 - r) / foot, 0.0, 1.0)
         plane = 0.85 - 0.6 * np.nan_to_num(cover)
     else:
-        ds, hs = _px_dist(np.where(inside, s, 0.0), 0.55, 0.08)
-        dt, ht = _px_dist(np.where(inside, t, 0.0), 0.55, 0.08)
+        # The footprints from the plane's coordinates wherever the ray meets it, not only
+        # inside its border: a border in the gradient's difference would shrink the bar the
+        # border runs through to a light line along it (the border's edge 1.4 px off).
+        ds, hs = _px_dist(np.where(hit, s, 0.0), 0.55, half_width)
+        dt, ht = _px_dist(np.where(hit, t, 0.0), 0.55, half_width)
         bars = np.maximum(np.nan_to_num(_ramp(ds, hs)), np.nan_to_num(_ramp(dt, ht)))
         plane = 0.85 - 0.6 * bars
     # The plane's own border, anti-aliased (a linear ramp one footprint wide).
