@@ -3,13 +3,21 @@
 """
 Raw frames of straight-line scenes rendered through an independent route (test helper).
 
-The lens: optiland's chief-ray heights ``h(theta)`` of the wide-angle and fisheye configs
-(test/data/optiland_wide_reference.json, traced by tools/make_optiland_reference.py with
-optiland's robust aimer), interpolated by a natural cubic spline of this file (not the
-package's Hermite tables) and inverted on a dense table. A raw pixel (u, v) at in-plane
-offsets ``(a, b) = ((u - c_u) p, (v - c_v) p)`` from the axis pixel ``c`` (the true axis
-offset) sees the direction of field angle ``theta = h^-1(hypot(a, b))`` and azimuth
-``atan2(b, a)``. No remap and no code of the package is used.
+The lens: optiland's chief rays of the wide-angle and fisheye configs as lines in image
+space, ``rho(z) = h(theta) + s(theta) (z - z_s)`` (heights ``h`` on the paraxial image plane
+``z_s``: test/data/optiland_wide_reference.json, traced by tools/make_optiland_reference.py
+with optiland's robust aimer; slopes ``s = d rho / dz``, z towards the sensor, at the same
+angles: test/data/optiland_chief_slopes.json, tools/make_optiland_chief_slopes.py),
+interpolated by natural cubic splines of this file (not the package's Hermite tables). No
+remap and no code of the package is used.
+
+The sensor: the lens axis meets it at the pixel ``c`` (the centre plus the true axis offset);
+a raw pixel (u, v) is the point ``Q = a e_u + b e_v`` from the axis point, ``(a, b) = ((u -
+c_u) p, (v - c_v) p)``, with the row and column directions of :func:`sensor_axes` (tilt_x
+then tilt_y, the words of docs/design.md section 2.16, built here from those words; a test
+ties them to the package's ``project``). It sees the direction of azimuth ``atan2(Q_y, Q_x)``
+and of the field angle whose chief-ray line passes through it: ``h(theta) + s(theta) Q_z =
+hypot(Q_x, Q_y)`` (untilted: ``theta = h^-1(hypot(a, b))``).
 
 Scenes (central camera, directions only): a planar grid of dark bars on a bounded light
 plane at any orientation, a box room (six walls of different greys with dark doors and
@@ -28,10 +36,12 @@ import cv2
 import numpy as np
 
 DATA = Path(__file__).resolve().parent / 'data' / 'optiland_wide_reference.json'
+SLOPES = Path(__file__).resolve().parent / 'data' / 'optiland_chief_slopes.json'
 LENSES = {'wide': ('wide_angle_160', 'config/wide_angle.yaml', 1920, 1200),
           'fisheye': ('fisheye_170', 'config/fisheye.yaml', 1280, 960)}
 PIXEL_MM = 0.002
 BLUR_PX = 0.7
+LINE_ITERATIONS = 2
 
 
 def _natural_spline(x: np.ndarray, y: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -54,26 +64,108 @@ def _natural_spline(x: np.ndarray, y: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 
 class Lens:
-    """The optiland curve of one lens, as a raw pixel -> direction map."""
+    """The optiland chief-ray lines of one lens, as a raw pixel -> direction map."""
 
     def __init__(self, name: str):
         key, self.config, self.width, self.height = LENSES[name]
         curve = json.loads(DATA.read_text())['lenses'][key]['curve']
         theta = np.radians(np.asarray(curve['field_angle_deg'], dtype=float))
         height = np.abs(np.asarray(curve['real_height_mm'], dtype=float))
+        lines = json.loads(SLOPES.read_text())['lenses'][key]
+        if not np.allclose(np.radians(lines['field_angle_deg']), theta, rtol=0, atol=1e-12):
+            raise ValueError(f'{SLOPES.name} is not traced at the curve angles of {DATA.name}')
         self.theta = np.linspace(0.0, theta[-1], 200001)
         self.h = _natural_spline(theta, height, self.theta)
+        self.s = _natural_spline(theta, np.asarray(lines['slope'], dtype=float), self.theta)
+        # h^-1 on a uniform grid of heights too: the tilted solve indexes both tables directly.
+        self.rho = np.linspace(0.0, self.h[-1], self.theta.size)
+        self.theta_of_rho = np.interp(self.rho, self.h, self.theta)
+        self._frame_key: tuple | None = None
+        self._frame = np.zeros((0, 3))
 
-    def directions(self, u: np.ndarray, v: np.ndarray, offset_px: tuple[float, float]
-                   ) -> np.ndarray:
-        """Return the unit direction of each raw pixel, shape (..., 3); NaN outside the field."""
+    def directions(self, u: np.ndarray, v: np.ndarray, offset_px: tuple[float, float],
+                   tilt_deg: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
+        """
+        Return the unit direction of each raw pixel, shape (..., 3); NaN outside the field.
+
+        :param u: raw columns.
+        :param v: raw rows.
+        :param offset_px: the axis pixel's offset from the sensor centre.
+        :param tilt_deg: ``(tilt_x, tilt_y)``: the sensor turned about its row line through
+            the axis point (rows of larger v closer to the lens), then about its turned
+            column line (columns of larger u closer).
+        :return: directions.
+        """
         a = (u - (self.width - 1) / 2.0 - offset_px[0]) * PIXEL_MM
         b = (v - (self.height - 1) / 2.0 - offset_px[1]) * PIXEL_MM
-        rho = np.hypot(a, b)
-        theta = np.interp(rho, self.h, self.theta, right=np.nan)
-        phi = np.arctan2(b, a)
-        s = np.sin(theta)
-        return np.stack([s * np.cos(phi), s * np.sin(phi), np.cos(theta)], axis=-1)
+        if tilt_deg[0] == 0.0 and tilt_deg[1] == 0.0:
+            rho = np.hypot(a, b)
+            theta = np.interp(rho, self.h, self.theta, right=np.nan)
+            phi = np.arctan2(b, a)
+            s = np.sin(theta)
+            return np.stack([s * np.cos(phi), s * np.sin(phi), np.cos(theta)], axis=-1)
+        e_u, e_v = sensor_axes(*tilt_deg)
+        qx, qy = a * e_u[0] + b * e_v[0], a * e_u[1] + b * e_v[1]
+        rho = np.hypot(qx, qy)
+        theta = self.line_through(rho, a * e_u[2] + b * e_v[2])
+        # The azimuth's cosine and sine straight from Q (the axis pixel itself: along +a).
+        with np.errstate(invalid='ignore', divide='ignore'):
+            scale = np.where(rho > 0.0, np.sin(theta) / rho, 0.0)
+        return np.stack([qx * scale, qy * scale, np.cos(theta)], axis=-1)
+
+    def frame(self, offset_px: tuple[float, float],
+              tilt_deg: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
+        """Return the directions of every raw pixel (read-only; the last pose is cached)."""
+        key = (tuple(offset_px), tuple(tilt_deg))
+        if self._frame_key != key:
+            u, v = np.meshgrid(np.arange(self.width, dtype=float),
+                               np.arange(self.height, dtype=float))
+            self._frame = self.directions(u, v, offset_px, tilt_deg)
+            self._frame.flags.writeable = False
+            self._frame_key = key
+        return self._frame
+
+    def line_through(self, rho: np.ndarray, dz: np.ndarray) -> np.ndarray:
+        """
+        Return the field angle whose chief-ray line passes ``rho`` from the axis at ``dz``.
+
+        Solves ``h(theta) + s(theta) dz = rho`` by the fixed point ``theta = h^-1(rho -
+        s(theta) dz)`` (a contraction: ``|s' dz / h'|`` is about ``dz`` over the exit pupil's
+        distance, 3e-3 here: two steps reach 1e-5 px); NaN beyond the traced field.
+        """
+        theta = _uniform_interp(self.rho, self.theta_of_rho, rho)
+        for _ in range(LINE_ITERATIONS):
+            slope = _uniform_interp(self.theta, self.s, theta)
+            theta = _uniform_interp(self.rho, self.theta_of_rho, rho - slope * dz)
+        return theta
+
+
+def _uniform_interp(x: np.ndarray, y: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Interpolate linearly on the uniform grid x (from 0); NaN past its end, y[0] below."""
+    step = x[1] - x[0]
+    with np.errstate(invalid='ignore'):
+        t = np.clip(q / step, 0.0, x.size - 1.0)
+        k = np.minimum(t.astype(np.int64), x.size - 2)
+        k[~np.isfinite(t)] = 0
+        t -= k
+        out = y[k] * (1.0 - t) + y[k + 1] * t
+        return np.where(q <= x[-1], out, np.nan)
+
+
+def sensor_axes(tilt_x_deg: float, tilt_y_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Return the tilted sensor's row and column directions in the read-out frame (a, b, z).
+
+    ``z`` runs along the axis towards the sensor. tilt_x turns the column direction to
+    ``(0, cos a, -sin a)`` (rows of larger v come closer to the lens) and the normal to
+    ``(0, sin a, cos a)``; tilt_y then turns the row direction about the turned column line:
+    ``cos b e_u - sin b n`` (columns of larger u come closer).
+    """
+    a, b = math.radians(tilt_x_deg), math.radians(tilt_y_deg)
+    e_v = np.array([0.0, math.cos(a), -math.sin(a)])
+    normal = np.array([0.0, math.sin(a), math.cos(a)])
+    e_u = math.cos(b) * np.array([1.0, 0.0, 0.0]) - math.sin(b) * normal
+    return e_u, e_v
 
 
 def _rot(yaw_deg: float, pitch_deg: float, roll_deg: float = 0.0) -> np.ndarray:
@@ -108,12 +200,12 @@ def _px_dist(coord: np.ndarray, period: float, half: float) -> np.ndarray:
 
 
 def grid(lens: Lens, offset_px: tuple[float, float], yaw: float, pitch: float,
-         roll: float, circles: bool = False) -> np.ndarray:
-    """Render a bounded grid of bars (or discs) on a plane; return an 8-bit raw frame."""
-    u, v = np.meshgrid(np.arange(lens.width, dtype=float), np.arange(lens.height, dtype=float))
-    d = lens.directions(u, v, offset_px)
+         roll: float, circles: bool = False, tilt_deg: tuple[float, float] = (0.0, 0.0),
+         half_width: float = 0.08) -> np.ndarray:
+    """Render a bounded grid of bars (half-width of the 0.55 period) or discs; 8-bit frame."""
+    d = lens.frame(offset_px, tilt_deg)
     s, t, hit = _plane_coords(d, _rot(yaw, pitch, roll), 1.0)
-    img = np.full(u.shape, 0.35)
+    img = np.full(d.shape[:-1], 0.35)
     limit = 2.2
     inside = hit & (np.abs(s) < limit) & (np.abs(t) < limit)
     if circles:
@@ -127,8 +219,11 @@ def grid(lens: Lens, offset_px: tuple[float, float], yaw: float, pitch: float,
             cover = np.clip(0.5 + (0.3 - r) / foot, 0.0, 1.0)
         plane = 0.85 - 0.6 * np.nan_to_num(cover)
     else:
-        ds, hs = _px_dist(np.where(inside, s, 0.0), 0.55, 0.08)
-        dt, ht = _px_dist(np.where(inside, t, 0.0), 0.55, 0.08)
+        # The footprints from the plane's coordinates wherever the ray meets it, not only
+        # inside its border: a border in the gradient's difference would shrink the bar the
+        # border runs through to a light line along it (the border's edge 1.4 px off).
+        ds, hs = _px_dist(np.where(hit, s, 0.0), 0.55, half_width)
+        dt, ht = _px_dist(np.where(hit, t, 0.0), 0.55, half_width)
         bars = np.maximum(np.nan_to_num(_ramp(ds, hs)), np.nan_to_num(_ramp(dt, ht)))
         plane = 0.85 - 0.6 * bars
     # The plane's own border, anti-aliased (a linear ramp one footprint wide).
@@ -164,11 +259,10 @@ def _room_sample(d: np.ndarray) -> np.ndarray:
 
 
 def box_room(lens: Lens, offset_px: tuple[float, float], yaw: float = 20.0,
-             pitch: float = -8.0) -> np.ndarray:
+             pitch: float = -8.0, tilt_deg: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
     """Render a box room (walls, doors), 4 x 4 supersampled at its edges; an 8-bit frame."""
     rot = _rot(yaw, pitch)
-    u, v = np.meshgrid(np.arange(lens.width, dtype=float), np.arange(lens.height, dtype=float))
-    d = lens.directions(u, v, offset_px)
+    d = lens.frame(offset_px, tilt_deg)
     img = np.nan_to_num(_room_sample(d @ rot.T))
     # Supersample only where the grey changes within a pixel's neighbourhood.
     kernel = np.ones((3, 3), np.uint8)
@@ -178,7 +272,7 @@ def box_room(lens: Lens, offset_px: tuple[float, float], yaw: float = 20.0,
     acc = np.zeros(rows.size)
     for du in (-0.375, -0.125, 0.125, 0.375):
         for dv in (-0.375, -0.125, 0.125, 0.375):
-            ds = lens.directions(cols + du, rows + dv, offset_px) @ rot.T
+            ds = lens.directions(cols + du, rows + dv, offset_px, tilt_deg) @ rot.T
             acc += np.nan_to_num(_room_sample(ds))
     img[rows, cols] = acc / 16.0
     return _finish(img, d)
@@ -186,10 +280,9 @@ def box_room(lens: Lens, offset_px: tuple[float, float], yaw: float = 20.0,
 
 def discs(lens: Lens, offset_px: tuple[float, float], seed: int = 3) -> np.ndarray:
     """Render dark circular spots, cones of directions seen along their axes; no lines."""
-    u, v = np.meshgrid(np.arange(lens.width, dtype=float), np.arange(lens.height, dtype=float))
-    d = lens.directions(u, v, offset_px)
+    d = lens.frame(offset_px)
     rng = np.random.default_rng(seed)
-    img = np.full(u.shape, 0.75)
+    img = np.full(d.shape[:-1], 0.75)
     for _ in range(14):
         theta, phi = rng.uniform(0.0, 1.3), rng.uniform(-math.pi, math.pi)
         centre = np.array([math.sin(theta) * math.cos(phi), math.sin(theta) * math.sin(phi),

@@ -78,6 +78,14 @@ SELF_CHECK_PX = 1e-6
 STOP_RESIDUAL_MM = 1e-9
 
 
+def provenance(ref: Any, generator: str, start: float) -> dict[str, Any]:
+    """Return the provenance entry of a reference file (generator, date, versions, runtime)."""
+    return {'generator': generator,
+            'date_utc': datetime.datetime.now(datetime.timezone.utc).strftime(
+                '%Y-%m-%dT%H:%M:%SZ'),
+            'versions': ref.versions(), 'runtime_s': round(time.monotonic() - start, 1)}
+
+
 def _load(name: str) -> Any:
     path = REPO / 'tools' / f'{name}.py'
     spec = importlib.util.spec_from_file_location(name, path)
@@ -330,11 +338,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f'[{time.monotonic() - start:5.1f} s] {key}: {len(lenses[key]["tx"])} directions',
               file=sys.stderr, flush=True)
     doc = {
-        'provenance': {
-            'generator': 'tools/make_optiland_assembly.py',
-            'date_utc': datetime.datetime.now(datetime.timezone.utc).strftime(
-                '%Y-%m-%dT%H:%M:%SZ'),
-            'versions': ref.versions(), 'runtime_s': round(time.monotonic() - start, 1)},
+        'provenance': provenance(ref, 'tools/make_optiland_assembly.py', start),
         'conventions': {
             'directions': 'tx = X / Z, ty = Y / Z in the camera optical frame (X right, Y down, '
                           'Z forward from H); the point on the plane at scene.distance_mm',

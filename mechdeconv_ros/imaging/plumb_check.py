@@ -10,21 +10,31 @@ a camera as assembled adds are a few unknowns: where the axis meets the sensor
 (``lens.image_distance_mm``). Each has a 1-sigma tolerance parameter; a tolerance of 0 (or a
 parameter the schema does not have) holds it fixed.
 
-Estimate: the pose ``p`` minimises ``sum_i (f n_e(p) . d_i(p))^2`` over the points ``i`` of
-the straight edges ``e`` (``d_i`` the direction of point i under p, ``n_e`` the normal of the
-edge's best great circle, refitted at every p: variable projection; ``f`` the output focal
-length in px, so the cost is in px^2 near the centre), by Levenberg-Marquardt with forward-
+Estimate: the pose ``p`` minimises ``sum_i r_i(p)^2`` over the points ``i`` of the straight
+edges ``e``, ``r_i`` the raw px distance of point i from the image of its edge's great circle
+to first order: ``r_i = n_e . d_i / hypot(n_theta / rho', n_phi sin(theta) / rho)`` (``d_i``
+the direction of point i under p, ``n_e`` the normal of the edge's best great circle, refitted
+at every p: variable projection; ``n_theta``, ``n_phi`` its components along the field angle
+and the azimuth at ``d_i``; ``rho'``, ``rho / sin(theta)`` the radial and tangential raw px
+per rad under p). Every factor is taken at the pose being judged: a scale fixed at the
+description let a larger image distance shrink the edges' raw noise in angle, and so pulled
+the estimate there (docs/design.md section 2.17). By Levenberg-Marquardt with forward-
 difference Jacobians, each parameter kept within ``BOUND_SIGMAS`` tolerances of the
 description. Edges that stay curved after the fit (circles, arcs: RMS over
 ``REJECT_FACTOR`` x the median and ``REJECT_FLOOR_PX``) are dropped and the fit is redone.
 
 Uncertainty: the larger of the classical ``s^2 (J^T J)^-1`` and the edge-clustered sandwich
 ``(J^T J)^-1 (sum_e g_e g_e^T) (J^T J)^-1`` (``g_e = J_e^T r_e``), which does not believe
-that the points along one edge err independently. A direction the edges cannot see (a tilt
-in a low-distortion lens: a homography keeps lines straight) has a near-zero eigenvalue of
-``J^T J`` and so a large sigma (capped at ``SIGMA_CAP`` tolerances), not a confident value:
-a parameter whose sigma exceeds its tolerance is reported at the description's value with
-that sigma, and the others are refitted with it held there.
+that the points along one edge err independently, plus in quadrature a systematic floor
+``eps^2 N [(J^T J)^-1]_kk`` with ``eps = SYSTEMATIC_FRACTION s`` (N points, s their RMS
+residual): the largest move a straightness error of ``eps`` px RMS can fake, aligned with the
+parameter's own signature. So a move counts only when it straightens the edges by more than
+what rendering, blur and detection may bend them alike along the field. A direction the
+edges cannot see (a tilt in a low-distortion lens: a homography keeps lines straight) has a
+near-zero eigenvalue of ``J^T J`` and so a large sigma (capped at ``SIGMA_CAP``
+tolerances), not a confident value: a parameter whose sigma exceeds its tolerance is
+reported at the description's value with that sigma, and the others are refitted with it
+held there.
 
 Verdict: ``not_enough_edges`` under ``MIN_EDGES`` edges or ``MIN_COVERAGE`` of the field (no
 estimate is made); else ``description_off`` when the RMS straightness with the description
@@ -63,6 +73,11 @@ MIN_COVERAGE = 0.05
 #: and REJECT_FLOOR_PX is not a straight line of the scene.
 REJECT_FACTOR = 3.0
 REJECT_FLOOR_PX = 0.3
+#: The systematic part of the edges' straightness error, as a fraction of their RMS residual
+#: (raw px): the sigmas hold the parameter move such an error could fake (docs/design.md
+#: section 2.17: true descriptions' estimates were off by the move of at most 0.067 of the
+#: RMS, with 3 sigmas this covers 0.09).
+SYSTEMATIC_FRACTION = 0.03
 #: The verdict is also ``description_off`` when an estimate differs from the description by
 #: more than OFF_SIGMAS of its sigma and one tolerance.
 OFF_SIGMAS = 3.0
@@ -169,9 +184,6 @@ class _Problem:
         self.points = np.concatenate(edges) if edges else np.zeros((0, 2))
         self.index = edge_index(edges)
         self.count = len(edges)
-        # Angles to raw px: the noise of edge points is about uniform in raw px.
-        dirs = self.lines.directions(self.points, self.pose0)
-        self.weight = np.nan_to_num(self.lines.raw_scale(dirs))
 
     def pose(self, x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         pose = self.pose0.copy()
@@ -179,11 +191,22 @@ class _Problem:
         return pose
 
     def residuals(self, x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-        dirs = self.lines.directions(self.points, self.pose(x))
-        good = np.all(np.isfinite(dirs), axis=1)
+        dirs, radial, tangential = self.lines.directions_and_scales(self.points, self.pose(x))
+        good = np.all(np.isfinite(dirs), axis=1) & (radial > 0.0)
         dirs[~good] = 0.0       # no weight in the fit, zero residual
-        _, res = great_circles(dirs, self.index, self.count)
-        return np.where(good, res, 0.0) * self.weight
+        normals, res = great_circles(dirs, self.index, self.count)
+        # Each point's raw px distance from its great circle's image (first order): the
+        # residual over its gradient per raw px, along the field angle and across the
+        # azimuth, at the pose being judged (see the module docstring).
+        n = normals[self.index]
+        sin_t = np.hypot(dirs[:, 0], dirs[:, 1])
+        with np.errstate(invalid='ignore', divide='ignore'):
+            cos_p = np.where(sin_t > 0.0, dirs[:, 0] / sin_t, 1.0)
+            sin_p = np.where(sin_t > 0.0, dirs[:, 1] / sin_t, 0.0)
+            n_theta = (n[:, 0] * cos_p + n[:, 1] * sin_p) * dirs[:, 2] - n[:, 2] * sin_t
+            n_phi = n[:, 1] * cos_p - n[:, 0] * sin_p
+            out = res / np.hypot(n_theta / radial, n_phi / tangential)
+        return np.where(good & np.isfinite(out), out, 0.0)
 
     def edge_rms(self, x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         r = self.residuals(x)
@@ -277,7 +300,11 @@ def _sigma(problem: _Problem, x: npt.NDArray[np.float64],
     grouped = np.stack([np.bincount(problem.index, jac[:, k] * r, problem.count)
                         for k in range(x.size)], axis=1)
     sandwich = a_inv @ (grouped.T @ grouped) @ a_inv
-    var = np.maximum(np.diag(classical), np.diag(sandwich))
+    # The systematic floor: a move a straightness error of SYSTEMATIC_FRACTION x the RMS
+    # residual could make, aligned with the parameter's own signature (its part no other
+    # parameter explains): eps sqrt(N [(J^T J)^-1]_kk), N the points.
+    eps = SYSTEMATIC_FRACTION * math.sqrt(float(r @ r) / max(r.size, 1))
+    var = np.maximum(np.diag(classical), np.diag(sandwich)) + eps ** 2 * r.size * np.diag(a_inv)
     return np.minimum(np.sqrt(var), SIGMA_CAP) * scale
 
 

@@ -111,6 +111,23 @@ class ChiefLines:
         :param pose: ``(dx_mm, dy_mm, alpha_deg, beta_deg, dz_mm)``.
         :return: ``(N, 3)``; NaN outside the traced field.
         """
+        return self.directions_and_scales(points, pose)[0]
+
+    def directions_and_scales(self, points: Points, pose: npt.NDArray[np.float64]
+                              ) -> tuple[Points, Points, Points]:
+        """
+        Return the directions and, at each, the raw px per rad under the same pose.
+
+        Radial: ``(dh / dtheta + ds / dtheta (Q_z + dz)) / p`` (a step of the field angle);
+        tangential: ``hypot(Q_x, Q_y) / (p sin theta)`` (a step across the azimuth), ``p``
+        the geometric mean pixel pitch. Taken at the pose being judged, so a pose that
+        shrinks the angle a raw pixel spans does not shrink the edges' raw noise with it
+        (docs/design.md section 2.17).
+
+        :param points: ``(N, 2)`` raw (x, y).
+        :param pose: ``(dx_mm, dy_mm, alpha_deg, beta_deg, dz_mm)``.
+        :return: ``(directions (N, 3), radial (N,), tangential (N,))``; NaN outside the field.
+        """
         px, py = self.pixel_mm
         a = (points[:, 0] - (self.width - 1) / 2.0 - pose[0] / px) * px
         b = (points[:, 1] - (self.height_px - 1) / 2.0 - pose[1] / py) * py
@@ -122,24 +139,15 @@ class ChiefLines:
         phi = np.arctan2(qy, qx)
         theta = self._solve(radius, dz)
         sin_t = np.sin(theta)
-        return np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), np.cos(theta)], axis=1)
-
-    def raw_scale(self, dirs: Points) -> Points:
-        """
-        Return raw px per rad around directions.
-
-        Isotropic: the geometric mean of the radial ``dh / dtheta`` and the tangential
-        ``h / sin theta`` scales.
-
-        :param dirs: ``(N, 3)`` unit directions.
-        :return: ``(N,)`` px / rad; NaN outside the field.
-        """
-        theta = np.arccos(np.clip(dirs[:, 2], -1.0, 1.0))
-        radial = np.interp(theta, self.theta, np.gradient(self.height, self.theta))
+        dirs = np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), np.cos(theta)], axis=1)
+        pitch = math.sqrt(px * py)
+        with np.errstate(invalid='ignore'):
+            radial = (np.interp(theta, self.theta, np.gradient(self.height, self.theta))
+                      + dz * np.interp(theta, self.theta, np.gradient(self.slope, self.theta)))
+        radial = radial / pitch
         with np.errstate(invalid='ignore', divide='ignore'):
-            tangential = np.where(theta > 1e-6, np.interp(theta, self.theta, self.height)
-                                  / np.sin(theta), radial)
-        return np.sqrt(radial * tangential) / math.sqrt(self.pixel_mm[0] * self.pixel_mm[1])
+            tangential = np.where(theta > 1e-6, radius / (pitch * sin_t), radial)
+        return dirs, radial, tangential
 
     def _solve(self, radius: Points, dz: Points) -> Points:
         """Solve ``h(theta) + s(theta) dz = radius`` on the table (linear pieces)."""
