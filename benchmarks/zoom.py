@@ -28,6 +28,9 @@ pixels (the same 24 x 13.5 mm sensor); ``zoom`` sweeps its whole range, 0 -> 1 i
    bare remap time (a plain ``cv2.remap`` of a 1080p rgb8 frame with the node's map, same
    run), and every frame's state within one table step of the state at its stamp.
 
+Quick (the suite's smoke run): a 320x180 frame and the table's first QUICK_ROWS rows (the zoom
+sweeps 0 -> 0.25 and back: a 9-state grid of the same density instead of 33), short windows.
+
 The machine is shared: the numbers are as loaded as it was (the run records the load).
 """
 
@@ -65,31 +68,52 @@ ACCURACY_SHARE = 0.95
 LATENCY_REMAP_FACTOR = 2.0
 WINDOW_S = 6.0
 READY_TIMEOUT_S = 120.0
+#: Zoom table rows of the quick run (the same row spacing, a quarter of the range).
+QUICK_ROWS = 5
 
 
-def sweep(t: float) -> float:
-    """Return the zoom position at time ``t`` (s): 0 -> 1 in SWEEP_S, back, and so on."""
+def sweep(t: float, span: float = 1.0) -> float:
+    """Return the zoom position at time ``t`` (s): 0 -> span in SWEEP_S, back, and so on."""
     phase = (t / SWEEP_S) % 2.0
-    return phase if phase <= 1.0 else 2.0 - phase
+    return span * (phase if phase <= 1.0 else 2.0 - phase)
 
 
-def zoom_values(width: int, height: int) -> dict[str, Any]:
-    """Return config/zoom.yaml at a frame size, the pixel pitch keeping the sensor size."""
+def zoom_values(width: int, height: int, rows: int = 0) -> dict[str, Any]:
+    """
+    Return config/zoom.yaml at a frame size, the pixel pitch keeping the sensor size.
+
+    :param width: frame width, px.
+    :param height: frame height, px.
+    :param rows: keep only the zoom table's first ``rows`` rows (0: all).
+    :return: the checked values.
+    """
     from mechdeconv_ros.schema.params import check_values, load_params_file
     values = dict(load_params_file(ZOOM_YAML))
     values.update({'sensor.width_px': width, 'sensor.height_px': height,
                    'sensor.pixel_size_x_um': SENSOR_MM[0] / width * 1e3,
                    'sensor.pixel_size_y_um': SENSOR_MM[1] / height * 1e3})
+    if rows:
+        gaps = len(values['lens.zoom.surfaces'])
+        values['lens.zoom.positions'] = list(values['lens.zoom.positions'][:rows])
+        values['lens.zoom.thickness_mm'] = list(values['lens.zoom.thickness_mm'][:rows * gaps])
     return check_values(values)
 
 
-def _overrides(width: int, height: int) -> list[str]:
-    values = zoom_values(width, height)
-    out = []
-    for name in ('sensor.width_px', 'sensor.height_px', 'sensor.pixel_size_x_um',
-                 'sensor.pixel_size_y_um'):
-        out += ['-p', f'{name}:={values[name]!r}']
-    return out
+def span_of(values: dict[str, Any]) -> float:
+    """Return the zoom range the sweep covers: the table's last position."""
+    return float(values['lens.zoom.positions'][-1])
+
+
+def _params_file(width: int, height: int, rows: int, folder: Path) -> Path:
+    """Write the node's params file: the zoom lens at this size (and table rows)."""
+    from mechdeconv_ros.schema.params import load_params_file, to_params_yaml
+    values = zoom_values(width, height, rows)
+    # The config's own names (with the sensor's): the node's defaults do the rest.
+    names = sorted(set(load_params_file(ZOOM_YAML)) | {
+        'sensor.width_px', 'sensor.height_px', 'sensor.pixel_size_x_um', 'sensor.pixel_size_y_um'})
+    path = folder / 'zoom_bench.yaml'
+    path.write_text(to_params_yaml(values, names=names))
+    return path
 
 
 # ---------------------------------------------------------------------------------------------
@@ -103,7 +127,8 @@ def _grid(values: dict[str, Any]) -> Any:
     return moving_rectifier(model, build_model)
 
 
-def strategy_and_accuracy(width: int, height: int, frames: int, reps: int) -> dict[str, Any]:
+def strategy_and_accuracy(width: int, height: int, frames: int, reps: int,
+                          rows: int = 0) -> dict[str, Any]:
     """Measure the two strategies' costs and the per-frame accuracy over one sweep."""
     import cv2
     import numpy as np
@@ -115,7 +140,8 @@ def strategy_and_accuracy(width: int, height: int, frames: int, reps: int) -> di
     from mechdeconv_ros.lenses.lens_table import mechanisms, values_at
     from mechdeconv_ros.model.model import build_model
 
-    values = zoom_values(width, height)
+    values = zoom_values(width, height, rows)
+    span = span_of(values)
     (zoom,) = mechanisms(values)
     start = time.perf_counter()
     rectifier = _grid(values)
@@ -123,11 +149,11 @@ def strategy_and_accuracy(width: int, height: int, frames: int, reps: int) -> di
     grid = rectifier.grid
     src = np.random.default_rng(0).integers(0, 256, (height, width, 3), dtype=np.uint8)
     dst = np.empty_like(src)
-    states = iter(np.linspace(0.0, 1.0, 997).tolist() * 100)
+    states = iter(np.linspace(0.0, span, 997).tolist() * 100)
     per_frame = time_ms(lambda: rectifier.prepare({'zoom': next(states)}), reps)
     bare = time_ms(lambda: cv2.remap(src, rectifier._map, None, cv2.INTER_LINEAR, dst=dst,
                                      borderMode=cv2.BORDER_CONSTANT, borderValue=0), reps)
-    full_model = time_ms(lambda: Rectifier(build_model(values_at(values, {'zoom': 0.37}))),
+    full_model = time_ms(lambda: Rectifier(build_model(values_at(values, {'zoom': 0.37 * span}))),
                          max(2, reps // 10))
     # One sweep, states as the node receives them.
     history = LensStateHistory({'zoom': zoom.joint})
@@ -138,10 +164,10 @@ def strategy_and_accuracy(width: int, height: int, frames: int, reps: int) -> di
     # Stamps start at 1 s: a stamp of 0 means "unstamped" (the newest state).
     t0 = 1_000_000_000
     for t in sorted({*range(0, frame_ns[-1] + period_ns, period_ns), *frame_ns}):
-        history.add(t0 + t, [zoom.joint], [sweep(t * 1e-9)])
+        history.add(t0 + t, [zoom.joint], [sweep(t * 1e-9, span)])
     rows = []
     for t in tqdm(frame_ns, desc='zoom accuracy', unit='frame'):
-        true = sweep(t * 1e-9)
+        true = sweep(t * 1e-9, span)
         used = history.at(t0 + t).positions['zoom']
         _, full = grid.at({'zoom': used})
         exact = build_model(values_at(values, {'zoom': true}))
@@ -174,7 +200,7 @@ def strategy_and_accuracy(width: int, height: int, frames: int, reps: int) -> di
 # 3: the node (ROS)
 # ---------------------------------------------------------------------------------------------
 
-def publisher_main(width: int, height: int, seconds: float) -> int:
+def publisher_main(width: int, height: int, seconds: float, span: float = 1.0) -> int:
     """Publish lens_state at 100 Hz and frames at 30 Hz (each after its own state) until SIGINT."""
     import threading
 
@@ -200,7 +226,7 @@ def publisher_main(width: int, height: int, seconds: float) -> int:
     t0 = time.time_ns()
 
     def state_at(now_ns: int) -> None:
-        msg = JointState(name=['zoom'], position=[sweep((now_ns - t0) * 1e-9)])
+        msg = JointState(name=['zoom'], position=[sweep((now_ns - t0) * 1e-9, span)])
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(now_ns, 1_000_000_000)
         with lock:
             states.publish(msg)
@@ -310,38 +336,42 @@ class ZoomProbe:
         self._rclpy.try_shutdown(context=self.context)
 
 
-def _node_argv(kind: str, width: int, height: int) -> list[str]:
+def _node_argv(kind: str, params: Path) -> list[str]:
     if kind in ('node', 'still'):
         # 'still': the same lens with its zoom joint off (the first rows, no lens_state).
         still = ['-p', 'lens.zoom.joint:=""'] if kind == 'still' else []
         return [sys.executable, '-m', 'mechdeconv_ros.node.correct_node', '--ros-args',
-                '--params-file', str(ZOOM_YAML)] + _overrides(width, height) + still
+                '--params-file', str(params)] + still
     return [sys.executable, '-m', 'benchmarks.passthrough_node']
 
 
 def node_run(width: int, height: int, seconds: float, grid: Any, warmup_s: float = 1.0,
-             kinds: Sequence[str] = ('passthrough', 'still', 'node')) -> dict[str, Any]:
+             kinds: Sequence[str] = ('passthrough', 'still', 'node'),
+             rows: int = 0) -> dict[str, Any]:
     """Run the relay and the node under the sweeping publisher; latency and states used."""
     import numpy as np
 
     domain = pick_domain_id('benchmarks', 91)
     env = graph_env(domain, shm_profile=True)
     log_dir = Path(tempfile.mkdtemp(prefix='mechdeconv_bench_zoom_'))
+    params = _params_file(width, height, rows, log_dir)
+    span = span_of(zoom_values(width, height, rows))
     probe = ZoomProbe(domain)
     out: dict[str, Any] = {'errors': []}
     # K_new[0][0] -> zoom position, by the grid (monotonic over the table).
-    positions = np.linspace(0.0, 1.0, 2001)
+    positions = np.linspace(0.0, span, 2001)
     focals = np.array([grid.camera_at({'zoom': p}).K_new[0, 0] for p in positions])
     monotonic = bool(np.all(np.diff(focals) > 0))
     out['focal_monotonic'] = monotonic
     try:
         for kind in kinds:
-            proc = start_child(_node_argv(kind, width, height), env, log_dir, kind)
+            proc = start_child(_node_argv(kind, params), env, log_dir, kind)
             # The publisher starts with the node (their start-ups overlap; the sweep's time
             # origin is the publisher's, whenever the node starts taking frames).
             pub = start_child([sys.executable, '-m', 'benchmarks.zoom', '--role',
                                'publisher', '--width', str(width), '--height',
-                               str(height)], env, log_dir, f'publisher_{kind}')
+                               str(height), '--span', str(span)], env, log_dir,
+                              f'publisher_{kind}')
             try:
                 ready = probe.spin_until(
                     lambda: probe.node.count_subscribers('/image_raw') > 0 and
@@ -361,7 +391,7 @@ def node_run(width: int, height: int, seconds: float, grid: Any, warmup_s: float
                 if probe.frame_ms:
                     stats['node_frame_ms'] = statistics.median(probe.frame_ms)
                 if kind == 'node':
-                    stats.update(_states(probe, pub, positions, focals, grid))
+                    stats.update(_states(probe, pub, positions, focals, grid, span))
                 out[kind] = stats
                 log(f'zoom [{kind}] {width}x{height}: {stats["fps"]:.1f} fps, p50 '
                     f'{stats.get("p50_ms", math.nan):.1f} ms')
@@ -377,7 +407,7 @@ def node_run(width: int, height: int, seconds: float, grid: Any, warmup_s: float
 
 
 def _states(probe: ZoomProbe, pub: Any, positions: Any, focals: Any,
-            grid: Any) -> dict[str, Any]:
+            grid: Any, span: float) -> dict[str, Any]:
     """Return how far each frame's state (from its camera_info_rect) is from its stamp's."""
     import numpy as np
     # The publisher prints its sweep's time origin when it stops.
@@ -390,7 +420,7 @@ def _states(probe: ZoomProbe, pub: Any, positions: Any, focals: Any,
     steps = []
     for stamp, focal in probe.focal.items():
         used = float(np.interp(focal, focals, positions))
-        true = sweep((stamp - t0) * 1e-9)
+        true = sweep((stamp - t0) * 1e-9, span)
         steps.append(abs(used - true) / zoom.step)
     if not steps:
         return {'state_error': 'no camera_info_rect'}
@@ -413,7 +443,8 @@ def run(out_dir: Path = RESULTS, quick: bool = False, ros: bool = True) -> dict[
     """
     width, height = QUICK_SIZE if quick else SIZE
     frames = 7 if quick else int(SWEEP_S * RATE_HZ) + 1
-    core = strategy_and_accuracy(width, height, frames, 5 if quick else 30)
+    rows = QUICK_ROWS if quick else 0
+    core = strategy_and_accuracy(width, height, frames, 5 if quick else 30, rows)
     grid = core.pop('_grid')
     log(f"zoom: grid {core['grid']['states']} states in {core['grid']['build_s']:.1f} s, "
         f"{core['grid']['memory_mb']:.1f} MB + {core['grid']['frame_map_mb']:.1f} MB map; per "
@@ -425,7 +456,8 @@ def run(out_dir: Path = RESULTS, quick: bool = False, ros: bool = True) -> dict[
     if ros:
         # Quick: no 'still' run (the same node and loop as 'node', with the joint off).
         node = node_run(width, height, 1.0 if quick else WINDOW_S, grid, 0.3 if quick else 1.0,
-                        ('passthrough', 'node') if quick else ('passthrough', 'still', 'node'))
+                        ('passthrough', 'node') if quick else ('passthrough', 'still', 'node'),
+                        rows)
         doc['node'] = node
         doc['errors'] += node.get('errors', [])
         relay, ours = node.get('passthrough', {}), node.get('node', {})
@@ -487,9 +519,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--out', type=Path, default=RESULTS)
     parser.add_argument('--width', type=int, default=SIZE[0])
     parser.add_argument('--height', type=int, default=SIZE[1])
+    parser.add_argument('--span', type=float, default=1.0, help='publisher: the zoom range')
     args = parser.parse_args(argv)
     if args.role == 'publisher':
-        return publisher_main(args.width, args.height, 0.0)
+        return publisher_main(args.width, args.height, 0.0, args.span)
     doc = run(args.out, quick=args.quick, ros=not args.no_ros)
     print('\n'.join(tables(doc)))
     return 0 if not doc['errors'] else 1
