@@ -24,6 +24,7 @@ from mechdeconv_ros.model.model import build_model
 from mechdeconv_ros.node.image_msgs import image_to_array
 from mechdeconv_ros.schema.params import defaults, load_params_file
 import numpy as np
+import psutil
 import pytest
 from rclpy.parameter import Parameter
 from ros_helpers import (
@@ -92,6 +93,10 @@ def test_node_check_diagnostics_warn_and_apply(tmp_path: Any) -> None:
                 proc.output()[-3000:]
         status, diag = check_status(3)
         assert diag['check_frames'] == '3'
+        # The check ran in the node's child process, at nice 19.
+        workers = [c for c in psutil.Process(proc.pid).children()
+                   if 'check_worker' in ' '.join(c.cmdline())]
+        assert len(workers) == 1 and workers[0].nice() == 19, workers
         for key in ('straightness_rms_px', 'straightness_max_px', 'edges', 'field_coverage',
                     'straightness_rms_px_after', 'verdict',
                     'estimate.sensor.axis_offset_x_mm.value',
@@ -123,6 +128,8 @@ def test_node_check_diagnostics_warn_and_apply(tmp_path: Any) -> None:
             feed_until(lambda: False, 1.0)
         assert 'check.apply: set' in proc.output()
         feed_until(lambda: False, 1.5)
+    # running_node stopped the node by SIGINT to its group and saw exit 0: the child is gone.
+    assert not workers[0].is_running(), workers[0]
 
     # No frame mixes two models: each output equals the in-process correction by the model
     # its camera_info names (the principal point = the axis offset it was corrected with).
