@@ -45,6 +45,7 @@ import sys
 import time
 from typing import Any
 
+import cv2
 from mechdeconv_ros.imaging.plumb_check import chains_from_corrected, check_chains
 from mechdeconv_ros.imaging.remap import build_float_maps
 import numpy as np
@@ -53,6 +54,8 @@ import numpy as np
 STOP_WAIT_S = 2.0
 #: The CPU priority (nice) of the child.
 NICE = 19
+#: One thread for numpy's BLAS and OpenMP in the child (set before it imports numpy).
+THREAD_ENV = {'OMP_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1', 'MKL_NUM_THREADS': '1'}
 #: The child's command: SIGINT ignored before anything else is imported (a node stopped while
 #: its child still imports numpy must not leave a KeyboardInterrupt traceback), then main().
 BOOTSTRAP = ('import signal, sys; signal.signal(signal.SIGINT, signal.SIG_IGN); '
@@ -166,6 +169,7 @@ class CheckWorker:
         env = dict(os.environ)
         env['PYTHONPATH'] = os.pathsep.join(
             p for p in (package_root, env.get('PYTHONPATH', '')) if p)
+        env.update(THREAD_ENV)
         try:
             self.process = subprocess.Popen(
                 [sys.executable, '-c', BOOTSTRAP, str(child.fileno())],
@@ -213,6 +217,8 @@ class CheckWorker:
             reply = self._conn.recv()
         except (EOFError, OSError) as err:
             raise WorkerGone(f'the check process stopped ({err!r})') from err
+        if 'error' in reply:
+            self._held = {}     # the child may not have taken them: send them again
         return reply
 
     def stop(self) -> None:
@@ -247,6 +253,7 @@ def main(argv: list[str] | None = None) -> int:
         os.setpriority(os.PRIO_PROCESS, 0, NICE)
     except (AttributeError, OSError):
         pass
+    cv2.setNumThreads(1)    # one core at most: the node's remap threads need the others
     return serve(Connection(int(args[0])))
 
 
