@@ -95,8 +95,9 @@ def _rss_mib(pid: int) -> tuple[float, float | None]:
 
 def _check_stat(node_pid: int) -> Path | None:
     """
-    Return the /proc stat file of what runs the checks: the check child, else the node's
-    nice-19 thread (the check thread of a node without a child), else None.
+    Return the /proc stat file of what runs the checks (None: nothing).
+
+    The check child, else the node's nice-19 thread (a node whose check is a thread).
     """
     import psutil
     for child in psutil.Process(node_pid).children():
