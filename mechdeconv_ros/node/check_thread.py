@@ -184,6 +184,7 @@ class CheckThread:
             else:
                 logger.error(f'check: {err}; restarting it ({self.restarts} of '
                              f'{MAX_RESTARTS})')
+                self._start_worker()    # now: its imports overlap the wait for the next check
             return None
 
     def _check(self, frame: np.ndarray, model: Any) -> None:
