@@ -46,6 +46,9 @@ from rclpy.parameter import Parameter
 WAIT_S = 0.5
 #: Restarts of a check process that died before the check stays off.
 MAX_RESTARTS = 3
+#: Seconds the thread waits, after its check process ended, for the node's stop (SIGTERM to
+#: the node's group ends the child first) before it counts a death.
+STOP_GRACE_S = 1.0
 
 
 def diagnostics_entries(result: CheckResult) -> dict[str, Any]:
@@ -85,6 +88,7 @@ class CheckThread:
         self._busy = False
         self._worker = CheckWorker()
         self._worker_lock = threading.Lock()    # start (thread) vs stop (node) of the child
+        self._stopping = threading.Event()
         self.restarts = 0
         self._reference = {name: float(value(name)) for name, _ in ESTIMATED}
         self.checks = 0
@@ -97,6 +101,7 @@ class CheckThread:
 
     def stop(self) -> None:
         """Stop the child process (bounded: SIGTERM, then SIGKILL) and the thread."""
+        self._stopping.set()
         with self._worker_lock:
             self._stop = True
             self._wake.set()
@@ -171,6 +176,9 @@ class CheckThread:
             return self._worker.check(frame, model, current, int(self._value('check.window')),
                                       float(self._value('check.max_rms_px')))
         except WorkerGone as err:
+            # SIGTERM to the node's process group ends the child first: not a death to log.
+            if self._stopping.wait(STOP_GRACE_S):
+                return None
             with self._worker_lock:
                 if self._stop:
                     return None
