@@ -4,12 +4,14 @@
 The check's child process (imaging/check_worker.py), without ROS.
 
 It must give the in-process check's result (the window pooled, a new current model judged),
-receive a model once (only when it changes), run at nice 19, ignore SIGINT, exit when
-stopped and when its parent dies by SIGKILL (no orphan), and report its death as WorkerGone.
+receive a model once (only when it changes), run at nice 19 and SCHED_IDLE, ignore SIGINT,
+exit when stopped and when its parent dies by SIGKILL (no orphan), and report its death as
+WorkerGone.
 """
 
 from __future__ import annotations
 
+import os
 import pickle
 import signal
 import subprocess
@@ -82,7 +84,7 @@ def test_the_child_is_nice_ignores_sigint_and_its_death_is_reported(
     blank = featureless(Lens('fisheye'))
     child = psutil.Process(worker.process.pid)
     assert worker.check(blank, model, model, 1, 0.3)['result'].verdict == 'not_enough_edges'
-    assert child.nice() == 19
+    assert child.nice() == 19 and os.sched_getscheduler(child.pid) == os.SCHED_IDLE
     child.send_signal(signal.SIGINT)
     reply = worker.check(blank, model, model, 1, 0.3)
     assert reply['result'].verdict == 'not_enough_edges' and child.is_running()
