@@ -12,9 +12,9 @@ inherits no ROS state, only the socket), which:
 
 * lowers its own CPU priority to nice 19 and, on Linux, the SCHED_IDLE policy (it runs on a
   core no other thread wants, and a waking thread of the node takes the core at once: on 2
-  cores this halved the cost of a check on the frames' p50 and removed it from p99, see
-  docs/benchmarks.md), runs OpenCV on one thread, and ignores SIGINT (a node is stopped by
-  SIGINT to its process group and must exit 0; its parent stops the child);
+  cores it lowered the check's cost on the frames in most runs, docs/benchmarks.md), runs
+  OpenCV on one thread, and ignores SIGINT (a node is stopped by SIGINT to its process group
+  and must exit 0; its parent stops the child);
 * exits when its end of the socket pair closes (the parent stopped, or died, even by
   SIGKILL: the kernel closes the parent's end), after the check it is in, if any.
 
