@@ -4,11 +4,13 @@
 The node's straight-edge check (issue 26): /diagnostics, WARN, check.apply; one node start-up.
 
 The node corrects fisheye frames rendered with the axis 16 px right and 12 px down
-(test/check_scenes.py) while its description says centred. Its check thread (check.rate_hz
-2 for the test) must publish what the same check computes in-process, WARN, and with
+(test/check_scenes.py) while its description says centred. Its check (check.rate_hz
+0.4 for the test) must publish what the same check computes in-process, WARN, and with
 ``check.apply`` set the offset on itself (``get_parameters`` shows it) within the tolerance
 of the truth; every output frame equals the in-process correction by the model of its own
-camera_info (no frame mixes two models).
+camera_info (no frame mixes two models). The check runs in a child process of the node at
+nice 19 (imaging/check_worker.py): restarted when it dies, not stopped by SIGINT to the
+node's group, gone when the node has exited (0).
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from mechdeconv_ros.model.model import build_model
 from mechdeconv_ros.node.image_msgs import image_to_array
 from mechdeconv_ros.schema.params import defaults, load_params_file
 import numpy as np
+import psutil
 import pytest
 from rclpy.parameter import Parameter
 from ros_helpers import (
@@ -92,6 +95,10 @@ def test_node_check_diagnostics_warn_and_apply(tmp_path: Any) -> None:
                 proc.output()[-3000:]
         status, diag = check_status(3)
         assert diag['check_frames'] == '3'
+        # The check ran in the node's child process, at nice 19.
+        workers = [c for c in psutil.Process(proc.pid).children()
+                   if 'check_worker' in ' '.join(c.cmdline())]
+        assert len(workers) == 1 and workers[0].nice() == 19, workers
         for key in ('straightness_rms_px', 'straightness_max_px', 'edges', 'field_coverage',
                     'straightness_rms_px_after', 'verdict',
                     'estimate.sensor.axis_offset_x_mm.value',
@@ -122,7 +129,20 @@ def test_node_check_diagnostics_warn_and_apply(tmp_path: Any) -> None:
             assert time.monotonic() < deadline, proc.output()[-3000:]
             feed_until(lambda: False, 1.0)
         assert 'check.apply: set' in proc.output()
-        feed_until(lambda: False, 1.5)
+
+        # A check process that dies is restarted once logged; the node goes on checking.
+        assert client.set_parameters(Parameter('check.rate_hz', Parameter.Type.DOUBLE, 10.0))[
+            0].successful       # the next checks at once
+        done = int(check_status(1)[1]['checks'])
+        workers[0].kill()
+        assert feed_until(lambda: check_status(done + 1) is not None, 60.0), \
+            proc.output()[-3000:]
+        assert 'restarting it (1 of 3)' in proc.output()
+        workers = [c for c in psutil.Process(proc.pid).children()
+                   if 'check_worker' in ' '.join(c.cmdline())]
+        assert len(workers) == 1 and workers[0].nice() == 19, workers
+    # running_node stopped the node by SIGINT to its group and saw exit 0: the child is gone.
+    assert not workers[0].is_running(), workers[0]
 
     # No frame mixes two models: each output equals the in-process correction by the model
     # its camera_info names (the principal point = the axis offset it was corrected with).

@@ -1,19 +1,26 @@
 # Copyright 2026 The mechdeconv_ros Authors.
 # SPDX-License-Identifier: Apache-2.0
 """
-The node's live self-check: a low-priority thread off the frame path (issue 26).
+The node's live self-check: a coordinator thread here, the work in a child process (issue 26).
 
 At most ``check.rate_hz`` times a second, counted from the end of the last check (0 = off),
-the frame callback hands over a COPY of a
-corrected frame with the model that made it (:meth:`CheckThread.offer`: a dict swap and one
-``np.copy``, nothing else on the frame path). The thread, at nice 19 on Linux, detects the
-edge chains of that frame, carries them to raw pixels through the same model's float maps
-(so the raw points do not depend on any later model), keeps the chains of the last
+the frame callback hands over a COPY of a corrected frame with the model that made it
+(:meth:`CheckThread.offer`: a dict swap and one ``np.copy``, nothing else on the frame
+path). The thread (nice 19 on Linux) sends it to the check's child process
+(:mod:`~mechdeconv_ros.imaging.check_worker`: nice 19, no ROS in it; started with the
+thread when ``check.rate_hz`` > 0, else at the first check) and waits for the reply with the
+interpreter lock released: the seconds of Python of a check no longer share the frame path's
+lock (a model is pickled, about 1 ms, only when it changes). The child detects
+the edge chains of that frame, carries them to raw pixels through the same model's float
+maps (so the raw points do not depend on any later model), keeps the chains of the last
 ``check.window`` frames, and runs :func:`~mechdeconv_ros.imaging.plumb_check.check_chains`
 with the node's current model. The result goes to ``/diagnostics`` under the keys of
 :meth:`~mechdeconv_ros.imaging.plumb_check.CheckResult.as_dict` (``estimate.<name>.value``
-and ``.sigma``), with ``check_ms_last`` (the thread's time), ``check_frames`` (in the
-window), ``checks`` (done since start) and ``check_applied`` (sets made).
+and ``.sigma``), with ``check_ms_last`` (the thread's time: send, check, reply),
+``check_frames`` (in the window), ``checks`` (done since start) and ``check_applied`` (sets
+made). A child that dies is logged and restarted (a fresh window) at most
+``MAX_RESTARTS`` times; after that the check stays off; the node never stops for it. On
+stop the child is terminated (SIGTERM, SIGKILL after 2 s) and waited for.
 
 ``check.apply``: when the verdict is ``description_off`` and a parameter's sigma is within
 its tolerance, the thread sets the estimated parameters on the node in ONE
@@ -25,20 +32,23 @@ once, so no frame mixes two models.
 
 from __future__ import annotations
 
-from collections import deque
 import os
 import threading
 import time
 from typing import Any, Callable
 
-from mechdeconv_ros.imaging.plumb_check import (
-    chains_from_corrected, check_chains, CheckResult, ESTIMATED, to_apply)
-from mechdeconv_ros.imaging.remap import build_float_maps
+from mechdeconv_ros.imaging.check_worker import CheckWorker, WorkerGone
+from mechdeconv_ros.imaging.plumb_check import CheckResult, ESTIMATED, to_apply
 import numpy as np
 from rclpy.parameter import Parameter
 
 #: Seconds the thread waits for a frame before it looks at its stop flag again.
 WAIT_S = 0.5
+#: Restarts of a check process that died before the check stays off.
+MAX_RESTARTS = 3
+#: Seconds the thread waits, after its check process ended, for the node's stop (SIGTERM to
+#: the node's group ends the child first) before it counts a death.
+STOP_GRACE_S = 1.0
 
 
 def diagnostics_entries(result: CheckResult) -> dict[str, Any]:
@@ -76,8 +86,10 @@ class CheckThread:
         self._stop = False
         self._last_offer = -1e9
         self._busy = False
-        self._maps: tuple[Any, Any, Any] = (None, None, None)
-        self._window: deque[list[Any]] = deque()
+        self._worker = CheckWorker()
+        self._worker_lock = threading.Lock()    # start (thread) vs stop (node) of the child
+        self._stopping = threading.Event()
+        self.restarts = 0
         self._reference = {name: float(value(name)) for name, _ in ESTIMATED}
         self.checks = 0
         self.applied = 0
@@ -88,11 +100,21 @@ class CheckThread:
         self._thread.start()
 
     def stop(self) -> None:
-        """Stop the thread and wait for it (at most a check's time)."""
-        self._stop = True
-        self._wake.set()
+        """Stop the child process (bounded: SIGTERM, then SIGKILL) and the thread."""
+        self._stopping.set()
+        with self._worker_lock:
+            self._stop = True
+            self._wake.set()
+            self._worker.stop()     # the thread's recv() sees the pipe close
         if self._thread.is_alive():
-            self._thread.join(timeout=30.0)
+            self._thread.join(timeout=10.0)
+        self._worker.close()
+
+    @property
+    def worker_pid(self) -> int | None:
+        """Return the check process's pid (None before the first check or after stop)."""
+        process = self._worker.process
+        return None if process is None else process.pid
 
     def offer(self, corrected: np.ndarray, model: Any) -> None:
         """
@@ -116,6 +138,8 @@ class CheckThread:
             os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 19)
         except (AttributeError, OSError):
             pass
+        if float(self._value('check.rate_hz')) > 0.0:
+            self._start_worker()     # now, not at the first check: its imports take a second
         while not self._stop:
             if not self._wake.wait(WAIT_S):
                 continue
@@ -135,23 +159,55 @@ class CheckThread:
                 self._last_offer = time.monotonic()
                 self._busy = False
 
+    def _start_worker(self) -> bool:
+        """Start the child process if it is not running; False if stopping or given up."""
+        with self._worker_lock:
+            if self._stop or self.restarts > MAX_RESTARTS:
+                return False
+            if self._worker.process is None:
+                self._worker.start()
+            return True
+
+    def _in_worker(self, frame: np.ndarray, model: Any, current: Any) -> dict[str, Any] | None:
+        """Check in the child process; None if it died (restarted next time) or stopping."""
+        if not self._start_worker():
+            return None
+        try:
+            return self._worker.check(frame, model, current, int(self._value('check.window')),
+                                      float(self._value('check.max_rms_px')))
+        except WorkerGone as err:
+            # SIGTERM to the node's process group ends the child first: not a death to log.
+            if self._stopping.wait(STOP_GRACE_S):
+                return None
+            with self._worker_lock:
+                if self._stop:
+                    return None
+                self._worker.stop()
+                self._worker.close()
+                self.restarts += 1
+            logger = self._node.get_logger()
+            if self.restarts > MAX_RESTARTS:
+                logger.error(f'check: {err}; the check stays off (restarted {MAX_RESTARTS} '
+                             'times)')
+            else:
+                logger.error(f'check: {err}; restarting it ({self.restarts} of '
+                             f'{MAX_RESTARTS})')
+                self._start_worker()    # now: its imports overlap the wait for the next check
+            return None
+
     def _check(self, frame: np.ndarray, model: Any) -> None:
         start = time.perf_counter()
-        if self._maps[0] is not model:
-            self._maps = (model, *build_float_maps(model))
-        _, map_x, map_y = self._maps
-        self._window.append(chains_from_corrected(frame, map_x, map_y))
-        while len(self._window) > int(self._value('check.window')):
-            self._window.popleft()
-        current = self._current_model() or model
-        if (current.width, current.height) != (model.width, model.height):
-            self._window.clear()
+        reply = self._in_worker(frame, model, self._current_model() or model)
+        if reply is None:
             return
-        chains = [c for frame_chains in self._window for c in frame_chains]
-        result = check_chains(current, chains, float(self._value('check.max_rms_px')))
+        if 'error' in reply:
+            raise RuntimeError(reply['error'])
+        result = reply['result']
+        if result is None:      # the frame's size is not the current model's: a new window
+            return
         self.checks += 1
         entries = diagnostics_entries(result)
-        entries['check_frames'] = len(self._window)
+        entries['check_frames'] = reply['frames']
         entries['checks'] = self.checks
         entries['check_ms_last'] = (time.perf_counter() - start) * 1e3
         entries['check_applied'] = self.applied

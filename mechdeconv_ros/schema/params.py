@@ -370,8 +370,8 @@ SCHEMA: tuple[ParamSpec, ...] = (
        '1-sigma assembly tolerance of the sensor distance behind the lens (the check '
        'estimates lens.image_distance_mm within it; 0 = held fixed).', 0.0, 10.0),
     _d('check.rate_hz', 0.2, 'Hz',
-       'Largest rate of the straight-edge self-check, a low-priority thread on a copy of a '
-       'corrected frame (never on the frame path); 0 = off.', 0.0, 10.0),
+       'Largest rate of the straight-edge self-check, a low-priority child process on a copy '
+       'of a corrected frame (never on the frame path); 0 = off.', 0.0, 10.0),
     _i('check.window', 5, '1',
        'Frames whose straight edges the check and its estimate pool (the last N checked).',
        1, 100),

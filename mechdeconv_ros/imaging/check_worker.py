@@ -1,0 +1,268 @@
+# Copyright 2026 The mechdeconv_ros Authors.
+# SPDX-License-Identifier: Apache-2.0
+"""
+The straight-edge check in a child process (issue 26): its loop and the parent's client.
+
+Pure Python, numpy and OpenCV, no ROS (docs/design.md section 2.17). One check of one frame is
+seconds of Python; in the node's process it held the interpreter lock that the frame path
+needs (p99 latency 33 -> 46 ms at 1280x960). Here it runs in a child process
+(``python -c BOOTSTRAP FD``: :data:`BOOTSTRAP` runs :func:`main` of this module; started by
+:class:`CheckWorker` with :class:`subprocess.Popen`, so it imports nothing of ROS and
+inherits no ROS state, only the socket), which:
+
+* lowers its own CPU priority to nice 19 and, on Linux, the SCHED_IDLE policy (it runs on a
+  core no other thread wants, and a waking thread of the node takes the core at once: on 2
+  cores it lowered the check's cost on the frames in most runs, docs/benchmarks.md), runs
+  OpenCV on one thread, and ignores SIGINT (a node is stopped by SIGINT to its process group
+  and must exit 0; its parent stops the child);
+* exits when its end of the socket pair closes (the parent stopped, or died, even by
+  SIGKILL: the kernel closes the parent's end), after the check it is in, if any.
+
+Protocol, over a :class:`multiprocessing.connection.Connection` on a Unix socket pair, one
+request and one reply at a time:
+
+* request: a pickled header ``{'shape', 'dtype', 'frame_model', 'current_model', 'models',
+  'window', 'max_rms_px'}`` and then the frame's bytes (``send_bytes`` of the array's buffer:
+  not pickled). Models are named by integer tokens; ``models`` carries only those the child
+  does not hold (a model is sent once, when it changes: :func:`portable`, about 90 kB and
+  1 ms for the fisheye config). Both sides keep only the two tokens of the last request.
+* reply: ``{'result': CheckResult | None, 'frames': n, 'ms': float}`` (None: the window was
+  restarted because the frame's size is not the current model's) or ``{'error': repr}``.
+
+The child keeps what the node's thread kept: the frame model's float maps (rebuilt when the
+token changes) and the raw chains of the last ``window`` frames (raw pixels, so they stay
+valid when the model changes).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+import copy
+import dataclasses
+import os
+from pathlib import Path
+import signal
+import socket
+import subprocess
+import sys
+import time
+from typing import Any
+
+import cv2
+from mechdeconv_ros.imaging.plumb_check import chains_from_corrected, check_chains
+from mechdeconv_ros.imaging.remap import build_float_maps
+import numpy as np
+
+#: Seconds the parent waits for the child to exit after SIGTERM before SIGKILL.
+STOP_WAIT_S = 2.0
+#: The CPU priority (nice) of the child.
+NICE = 19
+#: One thread for numpy's BLAS and OpenMP in the child (set before it imports numpy).
+THREAD_ENV = {'OMP_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1', 'MKL_NUM_THREADS': '1'}
+#: The child's command: SIGINT ignored before anything else is imported (a node stopped while
+#: its child still imports numpy must not leave a KeyboardInterrupt traceback), then main().
+BOOTSTRAP = ('import signal, sys; signal.signal(signal.SIGINT, signal.SIG_IGN); '
+             'from mechdeconv_ros.imaging.check_worker import main; sys.exit(main())')
+
+
+class WorkerGone(RuntimeError):
+    """The check's child process exited or its pipe broke."""
+
+
+def portable(model: Any) -> Any:
+    """
+    Return a shallow copy of a model without its lazily filled caches, to pickle.
+
+    The caches (``*_cache`` fields: summary, illumination, lateral colour) are filled by other
+    threads of the node and not needed by the check; the copy does not share them.
+
+    :param model: a LensModel.
+    :return: the copy.
+    """
+    out = copy.copy(model)
+    if dataclasses.is_dataclass(out):
+        for item in dataclasses.fields(out):
+            if item.name.endswith('_cache'):
+                object.__setattr__(out, item.name, {})
+    return out
+
+
+class Worker:
+    """The child's state: the models it holds, the frame model's maps, the chain window."""
+
+    def __init__(self) -> None:
+        """Create an empty worker."""
+        self.models: dict[int, Any] = {}
+        self._maps: tuple[int | None, Any, Any] = (None, None, None)
+        self._window: deque[list[Any]] = deque()
+
+    def handle(self, header: dict[str, Any], frame: np.ndarray) -> dict[str, Any]:
+        """
+        Check one frame (with the window before it) and return the reply.
+
+        :param header: the request header (module docstring).
+        :param frame: the corrected frame.
+        :return: the reply.
+        """
+        start = time.perf_counter()
+        self.models.update(header['models'])
+        token, current_token = header['frame_model'], header['current_model']
+        self.models = {k: v for k, v in self.models.items() if k in (token, current_token)}
+        model, current = self.models[token], self.models[current_token]
+        if self._maps[0] != token:
+            self._maps = (None, None, None)      # free the old maps before the new ones
+            self._maps = (token, *build_float_maps(model))
+        _, map_x, map_y = self._maps
+        self._window.append(chains_from_corrected(frame, map_x, map_y))
+        while len(self._window) > int(header['window']):
+            self._window.popleft()
+        if (current.width, current.height) != (model.width, model.height):
+            self._window.clear()
+            return {'result': None, 'frames': 0, 'ms': (time.perf_counter() - start) * 1e3}
+        chains = [c for frame_chains in self._window for c in frame_chains]
+        result = check_chains(current, chains, float(header['max_rms_px']))
+        return {'result': result, 'frames': len(self._window),
+                'ms': (time.perf_counter() - start) * 1e3}
+
+
+def serve(conn: Any) -> int:
+    """
+    Answer requests on a connection until it closes (the child's loop).
+
+    :param conn: the child's end.
+    :return: the exit status (0).
+    """
+    worker = Worker()
+    while True:
+        try:
+            header = conn.recv()
+            data = conn.recv_bytes()
+        except (EOFError, OSError):
+            return 0
+        except Exception as err:    # noqa: B902 - a broken stream: the parent starts anew
+            print(f'check worker: bad request: {err!r}', file=sys.stderr)
+            return 1
+        try:
+            frame = np.frombuffer(data, dtype=header['dtype']).reshape(header['shape'])
+            reply = worker.handle(header, frame)
+        except Exception as err:    # noqa: B902 - one bad check must not end the worker
+            reply = {'error': repr(err)}
+        del data
+        try:
+            conn.send(reply)
+        except OSError:
+            return 0
+
+
+class CheckWorker:
+    """The parent's client of one check child process (started on the first request)."""
+
+    def __init__(self) -> None:
+        """Create the client; no process yet."""
+        self.process: subprocess.Popen | None = None
+        self._conn: Any = None
+        self._held: dict[int, Any] = {}    # token -> model, as the child holds them
+        self._next_token = 0
+
+    def start(self) -> None:
+        """Start the child process (a fresh one: no models, no window)."""
+        from multiprocessing.connection import Connection
+        parent, child = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+        package_root = str(Path(__file__).resolve().parents[2])
+        env = dict(os.environ)
+        env['PYTHONPATH'] = os.pathsep.join(
+            p for p in (package_root, env.get('PYTHONPATH', '')) if p)
+        env.update(THREAD_ENV)
+        try:
+            self.process = subprocess.Popen(
+                [sys.executable, '-c', BOOTSTRAP, str(child.fileno())],
+                pass_fds=(child.fileno(),), env=env, stdin=subprocess.DEVNULL)
+        finally:
+            child.close()
+        self._conn = Connection(parent.detach())
+        self._held = {}
+
+    def _token(self, model: Any, taken: int = 0) -> int:
+        """Return the token of a model the child holds, else a new one (above ``taken``)."""
+        for token, held in self._held.items():
+            if held is model:
+                return token
+        self._next_token = max(self._next_token, taken) + 1
+        return self._next_token
+
+    def check(self, frame: np.ndarray, model: Any, current: Any, window: int,
+              max_rms_px: float) -> dict[str, Any]:
+        """
+        Check a frame in the child; block (the interpreter lock released) until it replies.
+
+        :param frame: the corrected frame (C-contiguous).
+        :param model: the model that corrected it.
+        :param current: the model to judge (the node's current one).
+        :param window: how many frames' chains to pool.
+        :param max_rms_px: ``check.max_rms_px``.
+        :return: the reply (module docstring).
+        :raises WorkerGone: if the child exited or the pipe broke.
+        """
+        if self.process is None or self.process.poll() is not None:
+            raise WorkerGone('the check process is not running')
+        frame_token = self._token(model)
+        current_token = frame_token if current is model else self._token(current, frame_token)
+        tokens = {frame_token: model, current_token: current}
+        new = {t: portable(m) for t, m in tokens.items() if t not in self._held}
+        frame = np.ascontiguousarray(frame)
+        header = {'shape': frame.shape, 'dtype': frame.dtype.str, 'models': new,
+                  'frame_model': frame_token, 'current_model': current_token,
+                  'window': int(window), 'max_rms_px': float(max_rms_px)}
+        try:
+            self._conn.send(header)
+            self._conn.send_bytes(frame.reshape(-1).view(np.uint8))     # flat: bytes, not rows
+            self._held = tokens
+            reply = self._conn.recv()
+        except (EOFError, OSError) as err:
+            raise WorkerGone(f'the check process stopped ({err!r})') from err
+        if 'error' in reply:
+            self._held = {}     # the child may not have taken them: send them again
+        return reply
+
+    def stop(self) -> None:
+        """Stop the child (SIGTERM, then SIGKILL after STOP_WAIT_S) and close the pipe."""
+        process, self.process = self.process, None
+        if process is not None and process.poll() is None:
+            process.terminate()
+            try:
+                process.wait(STOP_WAIT_S)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait(STOP_WAIT_S)
+
+    def close(self) -> None:
+        """Close the parent's end of the pipe (after :meth:`stop` and the caller's join)."""
+        if self._conn is not None:
+            self._conn.close()
+            self._conn = None
+
+
+def main(argv: list[str] | None = None) -> int:
+    """
+    Run the child: nice 19, SCHED_IDLE, SIGINT ignored; serve the socket until it closes.
+
+    :param argv: ``[FD]``, the child's end of the socket pair; default ``sys.argv[1:]``.
+    :return: the exit status.
+    """
+    from multiprocessing.connection import Connection
+    args = sys.argv[1:] if argv is None else argv
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        os.setpriority(os.PRIO_PROCESS, 0, NICE)
+    except (AttributeError, OSError):
+        pass
+    try:    # Linux: a core only when no other thread wants it; a waking one preempts at once
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+    except (AttributeError, OSError):
+        pass
+    cv2.setNumThreads(1)    # one core at most: the node's remap threads need the others
+    return serve(Connection(int(args[0])))
+
+
+if __name__ == '__main__':
+    sys.exit(main())
