@@ -210,7 +210,17 @@ class Link:
     def exchange(self, msg: Image, timeout: float = 10.0) -> dict[str, Any]:
         """Send one frame and return its three outputs."""
         stamp = self.send(msg)
-        self.wait_for([stamp], timeout)
+        deadline = time.monotonic() + timeout
+        # Until a first frame has come back complete after subscribing, the node's writers may
+        # not have matched these readers yet (the readers see the writers first): a sample
+        # written before that is not delivered to them, reliable or not (volatile). Until
+        # then the same frame (same stamp) is sent again each second.
+        while (not any(map(self.complete, self.outputs)) and
+               time.monotonic() < deadline - 1.0):
+            if self.client.spin_until(lambda: self.complete(stamp), 1.0):
+                break
+            self.pub.publish(msg)
+        self.wait_for([stamp], max(0.1, deadline - time.monotonic()))
         return self.outputs[stamp]
 
     # -- parameters and diagnostics -------------------------------------------------------
