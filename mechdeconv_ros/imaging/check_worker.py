@@ -13,8 +13,8 @@ inherits no ROS state, only the socket), which:
 * lowers its own CPU priority to nice 19 and, on Linux, the SCHED_IDLE policy (it runs on a
   core no other thread wants, and a waking thread of the node takes the core at once: on 2
   cores it lowered the check's cost on the frames in most runs, docs/benchmarks.md), runs
-  OpenCV on one thread, and ignores SIGINT (a node is stopped by SIGINT to its process group
-  and must exit 0; its parent stops the child);
+  OpenCV on one thread, runs in a session of its own and ignores SIGINT (a node is stopped by
+  SIGINT to its process group and must exit 0; its parent stops the child);
 * exits when its end of the socket pair closes (the parent stopped, or died, even by
   SIGKILL: the kernel closes the parent's end), after the check it is in, if any.
 
@@ -174,9 +174,14 @@ class CheckWorker:
             p for p in (package_root, env.get('PYTHONPATH', '')) if p)
         env.update(THREAD_ENV)
         try:
+            # Its own session (and process group): SIGINT to the node's group (Ctrl-C, a
+            # test, launch) must not reach it, not even while its interpreter still imports
+            # `site`, before BOOTSTRAP can ignore SIGINT (a "Fatal Python error" traceback in
+            # the node's log). The parent stops it; its socket's EOF ends it if the parent dies.
             self.process = subprocess.Popen(
                 [sys.executable, '-c', BOOTSTRAP, str(child.fileno())],
-                pass_fds=(child.fileno(),), env=env, stdin=subprocess.DEVNULL)
+                pass_fds=(child.fileno(),), env=env, stdin=subprocess.DEVNULL,
+                start_new_session=True)
         finally:
             child.close()
         self._conn = Connection(parent.detach())

@@ -46,8 +46,8 @@ from rclpy.parameter import Parameter
 WAIT_S = 0.5
 #: Restarts of a check process that died before the check stays off.
 MAX_RESTARTS = 3
-#: Seconds the thread waits, after its check process ended, for the node's stop (SIGTERM to
-#: the node's group ends the child first) before it counts a death.
+#: Seconds the thread waits, after its check process ended, for the node's stop (a stop in
+#: progress ends the child first) before it counts a death.
 STOP_GRACE_S = 1.0
 
 
@@ -176,7 +176,8 @@ class CheckThread:
             return self._worker.check(frame, model, current, int(self._value('check.window')),
                                       float(self._value('check.max_rms_px')))
         except WorkerGone as err:
-            # SIGTERM to the node's process group ends the child first: not a death to log.
+            # A child ended during the node's stop (or by a signal to its session) is not
+            # a death to log.
             if self._stopping.wait(STOP_GRACE_S):
                 return None
             with self._worker_lock:
