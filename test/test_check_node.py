@@ -141,6 +141,12 @@ def test_node_check_diagnostics_warn_and_apply(tmp_path: Any) -> None:
         workers = [c for c in psutil.Process(proc.pid).children()
                    if 'check_worker' in ' '.join(c.cmdline())]
         assert len(workers) == 1 and workers[0].nice() == 19, workers
+
+        # check.rate_hz 0 turns the check off: its process goes (its memory with it).
+        assert client.set_parameters(Parameter('check.rate_hz', Parameter.Type.DOUBLE, 0.0))[
+            0].successful
+        assert feed_until(lambda: not workers[0].is_running(), 10.0), proc.output()[-3000:]
+        assert 'check: off (check.rate_hz 0)' in proc.output()
     # running_node stopped the node by SIGINT to its group and saw exit 0: the child is gone.
     assert not workers[0].is_running(), workers[0]
 

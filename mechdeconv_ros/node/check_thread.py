@@ -20,7 +20,8 @@ and ``.sigma``), with ``check_ms_last`` (the thread's time: send, check, reply),
 ``check_frames`` (in the window), ``checks`` (done since start) and ``check_applied`` (sets
 made). A child that dies is logged and restarted (a fresh window) at most
 ``MAX_RESTARTS`` times; after that the check stays off; the node never stops for it. On
-stop the child is terminated (SIGTERM, SIGKILL after 2 s) and waited for.
+stop, and within ``WAIT_S`` of ``check.rate_hz`` set to 0, the child is terminated (SIGTERM,
+SIGKILL after 2 s) and waited for; a later rate above 0 starts a new one.
 
 ``check.apply``: when the verdict is ``description_off`` and a parameter's sigma is within
 its tolerance, the thread sets the estimated parameters on the node in ONE
@@ -142,6 +143,7 @@ class CheckThread:
             self._start_worker()     # now, not at the first check: its imports take a second
         while not self._stop:
             if not self._wake.wait(WAIT_S):
+                self._stop_worker_if_off()
                 continue
             self._wake.clear()
             with self._lock:
@@ -158,6 +160,17 @@ class CheckThread:
                 # 1 / check.rate_hz between checks, however long one takes.
                 self._last_offer = time.monotonic()
                 self._busy = False
+
+    def _stop_worker_if_off(self) -> None:
+        """Stop the child when ``check.rate_hz`` was set to 0 (its memory back; the window too)."""
+        if float(self._value('check.rate_hz')) > 0.0:
+            return
+        with self._worker_lock:
+            if self._stop or self._worker.process is None:
+                return
+            self._worker.stop()
+            self._worker.close()
+        self._node.get_logger().info('check: off (check.rate_hz 0): its process stopped')
 
     def _start_worker(self) -> bool:
         """Start the child process if it is not running; False if stopping or given up."""

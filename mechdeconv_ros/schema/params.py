@@ -371,7 +371,8 @@ SCHEMA: tuple[ParamSpec, ...] = (
        'estimates lens.image_distance_mm within it; 0 = held fixed).', 0.0, 10.0),
     _d('check.rate_hz', 0.2, 'Hz',
        'Largest rate of the straight-edge self-check, a low-priority child process on a copy '
-       'of a corrected frame (never on the frame path); 0 = off.', 0.0, 10.0),
+       'of a corrected frame (never on the frame path); 0 = off (the process stops).', 0.0,
+       10.0),
     _i('check.window', 5, '1',
        'Frames whose straight edges the check and its estimate pool (the last N checked).',
        1, 100),
