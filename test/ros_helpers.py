@@ -60,17 +60,11 @@ def next_domain_id() -> int:
 
     :return: the domain id, in the tests' range (1-100).
     """
-    first, last = process_env.DOMAIN_RANGES['tests']
-    size = last - first + 1
-    # pytest-xdist names its workers gw0, gw1, ... (PYTEST_XDIST_WORKER) and says how many
-    # there are: worker k of n takes the ids first + k, first + k + n, ... only.
-    worker = os.environ.get('PYTEST_XDIST_WORKER', 'gw0')[2:]
+    # pytest-xdist names its workers gw0, gw1, ... and says how many there are: each worker
+    # is a lane of the tests' range, so two workers never share a domain.
+    worker = int(os.environ.get('PYTEST_XDIST_WORKER', 'gw0')[2:])
     workers = int(os.environ.get('PYTEST_XDIST_WORKER_COUNT', '1'))
-    slots = size // workers
-    index = int(worker) + workers * ((os.getpid() * 7 + next(_domain_counter)) % slots)
-    if str(first + index) == os.environ.get('ROS_DOMAIN_ID'):    # never the user's own domain
-        index = (index + workers) % (slots * workers)
-    return first + index
+    return process_env.pick_domain_id('tests', next(_domain_counter), worker, workers)
 
 
 def ros_env(domain_id: int, extra: dict[str, str] | None = None) -> dict[str, str]:

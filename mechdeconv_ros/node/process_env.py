@@ -83,26 +83,30 @@ def keep_large_buffers() -> bool:
 # Domain ids, config files, environment
 # ---------------------------------------------------------------------------------------------
 
-def pick_domain_id(user: str, salt: int = 0) -> int:
+def pick_domain_id(user: str, salt: int = 0, lane: int = 0, lanes: int = 1) -> int:
     """
     Return a ``ROS_DOMAIN_ID`` in ``user``'s range, derived from the pid and ``salt``.
 
     Two processes (two test runs, say) get different ids unless their pids collide modulo the
     range; one process gets different ids for different salts. The caller's own exported
     ``ROS_DOMAIN_ID`` is skipped, so the graph never joins the user's everyday domain.
+    With ``lanes`` > 1 the range is dealt out: lane k takes only the ids ``first + k``,
+    ``first + k + lanes``, ..., so parallel callers with distinct lanes never share one.
 
     :param user: a key of :data:`DOMAIN_RANGES` (``tests``, ``demo``, ``benchmarks``,
         ``soak``).
     :param salt: a counter or offset of the caller.
+    :param lane: this caller's lane, 0 to ``lanes`` - 1.
+    :param lanes: how many callers share the range.
     :return: the domain id.
     :raises KeyError: for an unknown user.
     """
     first, last = DOMAIN_RANGES[user]
-    size = last - first + 1
-    index = (os.getpid() * 7 + salt) % size
-    if str(first + index) == os.environ.get('ROS_DOMAIN_ID'):
-        index = (index + 1) % size
-    return first + index
+    slots = (last - first + 1) // lanes
+    index = (os.getpid() * 7 + salt) % slots
+    if str(first + lane + lanes * index) == os.environ.get('ROS_DOMAIN_ID'):
+        index = (index + 1) % slots
+    return first + lane + lanes * index
 
 
 def config_file(name: str) -> Path:
