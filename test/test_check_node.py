@@ -10,7 +10,8 @@ The node corrects fisheye frames rendered with the axis 16 px right and 12 px do
 of the truth; every output frame equals the in-process correction by the model of its own
 camera_info (no frame mixes two models). The check runs in a child process of the node at
 nice 19 (imaging/check_worker.py): restarted when it dies, not stopped by SIGINT to the
-node's group, gone when the node has exited (0).
+node's group, gone when the node has exited (0); held back while the node's frame path is
+busier than ``check.max_load``.
 """
 
 from __future__ import annotations
@@ -141,6 +142,34 @@ def test_node_check_diagnostics_warn_and_apply(tmp_path: Any) -> None:
         workers = [c for c in psutil.Process(proc.pid).children()
                    if 'check_worker' in ' '.join(c.cmdline())]
         assert len(workers) == 1 and workers[0].nice() == 19, workers
+
+        # A busy frame path holds the check back (check.max_load): frames back to back,
+        # as fast as the node takes them, keep its load above 0.05; no check completes
+        # after the first second (one in progress is paused, not finished).
+        assert client.set_parameters(Parameter('check.max_load', Parameter.Type.DOUBLE, 0.05))[
+            0].successful
+
+        def latest() -> dict[str, str]:
+            return {kv.key: kv.value for kv in diagnostics[-1].status[0].values}
+
+        def flood(seconds: float) -> None:
+            end = time.monotonic() + seconds
+            while time.monotonic() < end:
+                msg = make_image(frames[count[0] % len(frames)], 'mono8')
+                sent[client.next_stamp(msg)] = count[0] % len(frames)
+                pub.publish(msg)
+                count[0] += 1
+                client.spin_for(0.005)
+
+        flood(1.5)
+        held = latest()
+        flood(2.5)
+        busy = latest()
+        assert int(busy['checks']) == int(held['checks']), (held, busy)
+        assert int(busy['check_deferred']) + int(busy['check_pauses']) > 0, busy
+        assert client.set_parameters(Parameter('check.max_load', Parameter.Type.DOUBLE, 1.0))[
+            0].successful
+        assert feed_until(lambda: check_status(int(busy['checks']) + 1) is not None, 30.0)
 
         # check.rate_hz 0 turns the check off: its process goes (its memory with it).
         assert client.set_parameters(Parameter('check.rate_hz', Parameter.Type.DOUBLE, 0.0))[

@@ -112,3 +112,30 @@ def test_no_orphan_when_the_parent_is_killed() -> None:
         parent.kill()
         parent.wait(5.0)
         parent.stdout.close()
+
+
+def test_a_paused_child_waits_then_answers_and_stops_at_once(
+        worker: CheckWorker, models: tuple[object, object]) -> None:
+    """The node pauses a check (SIGSTOP) while its frame path is busy (imaging/frame_load)."""
+    model = models[0]
+    blank = featureless(Lens('fisheye'))
+    child = psutil.Process(worker.process.pid)
+    stopped: list[bool] = []
+
+    def waiting() -> None:
+        # Called while no reply has come (the frame is sent): pause, look twice, continue.
+        if not stopped:
+            worker.pause(True)
+        stopped.append(child.status() == psutil.STATUS_STOPPED)
+        if len(stopped) == 3:
+            worker.pause(False)
+
+    reply = worker.check(blank, model, model, 1, 0.3, waiting=waiting, poll_s=0.05)
+    assert reply['result'].verdict == 'not_enough_edges'
+    # (SIGSTOP is delivered asynchronously: the first look may come before it.)
+    assert stopped[1:3] == [True, True] and not worker.paused
+    assert child.status() != psutil.STATUS_STOPPED
+    worker.pause(True)
+    process = worker.process
+    worker.stop()       # a paused child ends by SIGTERM, not the SIGKILL after 2 s
+    assert process.returncode == -signal.SIGTERM

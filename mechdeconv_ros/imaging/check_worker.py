@@ -46,7 +46,7 @@ import socket
 import subprocess
 import sys
 import time
-from typing import Any
+from typing import Any, Callable
 
 import cv2
 from mechdeconv_ros.imaging.plumb_check import chains_from_corrected, check_chains
@@ -160,6 +160,8 @@ class CheckWorker:
     def __init__(self) -> None:
         """Create the client; no process yet."""
         self.process: subprocess.Popen | None = None
+        #: Whether the child is stopped by :meth:`pause` (SIGSTOP) and not yet resumed.
+        self.paused = False
         self._conn: Any = None
         self._held: dict[int, Any] = {}    # token -> model, as the child holds them
         self._next_token = 0
@@ -186,6 +188,7 @@ class CheckWorker:
             child.close()
         self._conn = Connection(parent.detach())
         self._held = {}
+        self.paused = False
 
     def _token(self, model: Any, taken: int = 0) -> int:
         """Return the token of a model the child holds, else a new one (above ``taken``)."""
@@ -196,7 +199,8 @@ class CheckWorker:
         return self._next_token
 
     def check(self, frame: np.ndarray, model: Any, current: Any, window: int,
-              max_rms_px: float) -> dict[str, Any]:
+              max_rms_px: float, waiting: Callable[[], None] | None = None,
+              poll_s: float = 0.25) -> dict[str, Any]:
         """
         Check a frame in the child; block (the interpreter lock released) until it replies.
 
@@ -205,6 +209,10 @@ class CheckWorker:
         :param current: the model to judge (the node's current one).
         :param window: how many frames' chains to pool.
         :param max_rms_px: ``check.max_rms_px``.
+        :param waiting: called every ``poll_s`` seconds after the frame is sent, while the
+            reply has not come: the node pauses and continues the child there (never during
+            the send, which a stopped child would block).
+        :param poll_s: seconds between calls of ``waiting``.
         :return: the reply (module docstring).
         :raises WorkerGone: if the child exited or the pipe broke.
         """
@@ -222,6 +230,8 @@ class CheckWorker:
             self._conn.send(header)
             self._conn.send_bytes(frame.reshape(-1).view(np.uint8))     # flat: bytes, not rows
             self._held = tokens
+            while waiting is not None and not self._conn.poll(poll_s):
+                waiting()
             reply = self._conn.recv()
         except (EOFError, OSError) as err:
             raise WorkerGone(f'the check process stopped ({err!r})') from err
@@ -229,9 +239,29 @@ class CheckWorker:
             self._held = {}     # the child may not have taken them: send them again
         return reply
 
+    def pause(self, paused: bool) -> None:
+        """
+        Stop (SIGSTOP) or continue (SIGCONT) the child; nothing if it is already so or gone.
+
+        A stopped child holds its memory and its place in a check; it uses no CPU, no memory
+        bandwidth, no cache (what its priority alone could not give the frame path).
+
+        :param paused: True to stop it, False to continue it.
+        """
+        process = self.process
+        if process is None or paused == self.paused:
+            return
+        try:
+            process.send_signal(signal.SIGSTOP if paused else signal.SIGCONT)
+        except OSError:     # it ended meanwhile: its reply (EOF) tells the thread
+            return
+        self.paused = paused
+
     def stop(self) -> None:
         """Stop the child (SIGTERM, then SIGKILL after STOP_WAIT_S) and close the pipe."""
+        self.pause(False)     # not needed for SIGTERM (fatal: it wakes a stopped one); tidy
         process, self.process = self.process, None
+        self.paused = False
         if process is not None and process.poll() is None:
             process.terminate()
             try:

@@ -4,9 +4,16 @@
 The node's live self-check: a coordinator thread here, the work in a child process (issue 26).
 
 At most ``check.rate_hz`` times a second, counted from the end of the last check (0 = off),
-the frame callback hands over a COPY of a corrected frame with the model that made it
-(:meth:`CheckThread.offer`: a dict swap and one ``np.copy``, nothing else on the frame
-path). The thread (nice 19 on Linux) sends it to the check's child process
+and only while the frame path's load (the busy fraction of its last second,
+:mod:`~mechdeconv_ros.imaging.frame_load`) is at most ``check.max_load``, the frame callback
+hands over a COPY of a corrected frame with the model that made it (:meth:`CheckThread.offer`:
+one ``exp`` per frame, and at a check a dict swap and one ``np.copy``). A check in progress
+when the load rises above ``check.max_load`` is paused (SIGSTOP to its process) until the load
+is below 0.8 of it: an idle-priority process still shares the memory bus and the cache, and
+on a node paced at its serial bound it cost 4-5 % of the frames (``check_deferred`` and
+``check_pauses`` in ``/diagnostics`` count what the gate held back).
+
+The thread (nice 19 on Linux) sends the frame to the check's child process
 (:mod:`~mechdeconv_ros.imaging.check_worker`: nice 19, no ROS in it; started with the
 thread when ``check.rate_hz`` > 0, else at the first check) and waits for the reply with the
 interpreter lock released: the seconds of Python of a check no longer share the frame path's
@@ -39,12 +46,15 @@ import time
 from typing import Any, Callable
 
 from mechdeconv_ros.imaging.check_worker import CheckWorker, WorkerGone
+from mechdeconv_ros.imaging.frame_load import LoadGate
 from mechdeconv_ros.imaging.plumb_check import CheckResult, ESTIMATED, to_apply
 import numpy as np
 from rclpy.parameter import Parameter
 
 #: Seconds the thread waits for a frame before it looks at its stop flag again.
 WAIT_S = 0.5
+#: Seconds between two looks at the frame path's load while a check runs (pause / continue).
+LOAD_POLL_S = 0.05
 #: Restarts of a check process that died before the check stays off.
 MAX_RESTARTS = 3
 #: Seconds the thread waits, after its check process ended, for the node's stop (a stop in
@@ -70,7 +80,7 @@ class CheckThread:
     """The low-priority straight-edge check of a node."""
 
     def __init__(self, node: Any, value: Callable[[str], Any], current_model: Callable[[], Any],
-                 publish: Callable[[dict[str, Any]], None]):
+                 publish: Callable[[dict[str, Any]], None], counters: dict[str, Any]):
         """
         Create the thread (not started).
 
@@ -78,9 +88,18 @@ class CheckThread:
         :param value: the node's current parameter value by name.
         :param current_model: returns the node's active model (None before the first frame).
         :param publish: receives the /diagnostics entries after each check.
+        :param counters: /diagnostics entries updated here (``check_deferred`` by the frame
+            path, ``check_pauses`` by this thread); both keys are set now, so the diagnostics
+            timer never sees the dict change size.
         """
         self._node, self._value, self._current_model = node, value, current_model
         self._publish = publish
+        self._counters = counters
+        counters.update(check_deferred=0, check_pauses=0)
+        # The frame path's load: written by the executor thread (offer), read by this
+        # thread while it waits for a paused check (one float: no lock needed).
+        self._gate = LoadGate()
+        self.pauses = 0
         self._lock = threading.Lock()
         self._pending: tuple[np.ndarray, Any] | None = None
         self._wake = threading.Event()
@@ -117,22 +136,54 @@ class CheckThread:
         process = self._worker.process
         return None if process is None else process.pid
 
-    def offer(self, corrected: np.ndarray, model: Any) -> None:
+    def offer(self, corrected: np.ndarray, model: Any, busy_s: float) -> None:
         """
-        Hand over a corrected frame, if the rate allows and the thread is idle (frame path).
+        Hand over a corrected frame, if the rate, the load and the thread allow (frame path).
+
+        Every frame of a static model comes here (executor thread): its busy time feeds the
+        frame path's load (:mod:`~mechdeconv_ros.imaging.frame_load`). Above
+        ``check.max_load`` no check starts (the next chance is a period later); a check in
+        progress is paused by the thread (:meth:`_pause_for_load`).
 
         :param corrected: the corrected frame (copied here when taken).
         :param model: the model that corrected it.
+        :param busy_s: seconds this frame has kept the frame path busy so far.
         """
-        rate = float(self._value('check.rate_hz'))
         now = time.monotonic()
+        load = self._gate.load.add(busy_s, now)
+        rate = float(self._value('check.rate_hz'))
         if rate <= 0.0 or self._busy or now - self._last_offer < 1.0 / rate:
             return
         self._last_offer = now
+        if not self._gate.may_start(load, float(self._value('check.max_load'))):
+            self._counters['check_deferred'] = self._gate.deferred
+            return
         with self._lock:
             self._pending = (np.copy(corrected), model)
             self._busy = True
         self._wake.set()
+
+    def _pause_for_load(self) -> None:
+        """
+        Pause or continue the check's process from the frame path's load (this thread).
+
+        Called every :data:`LOAD_POLL_S` while a check's reply has not come (never while a
+        frame is being sent: a stopped process would stop the send). Never waits for the stop
+        lock: a stop in progress continues the process itself.
+        """
+        worker = self._worker
+        paused = self._gate.should_pause(self._gate.load.value(time.monotonic()),
+                                         float(self._value('check.max_load')), worker.paused)
+        if paused == worker.paused or not self._worker_lock.acquire(blocking=False):
+            return
+        try:
+            if not self._stop:
+                worker.pause(paused)
+                if paused:
+                    self.pauses += 1
+                    self._counters['check_pauses'] = self.pauses
+        finally:
+            self._worker_lock.release()
 
     def _run(self) -> None:
         try:        # the lowest CPU priority for this thread only (Linux: a thread id)
@@ -168,7 +219,7 @@ class CheckThread:
         with self._worker_lock:
             if self._stop or self._worker.process is None:
                 return
-            self._worker.stop()
+            self._worker.stop()     # continues a paused one first
             self._worker.close()
         self._node.get_logger().info('check: off (check.rate_hz 0): its process stopped')
 
@@ -187,7 +238,8 @@ class CheckThread:
             return None
         try:
             return self._worker.check(frame, model, current, int(self._value('check.window')),
-                                      float(self._value('check.max_rms_px')))
+                                      float(self._value('check.max_rms_px')),
+                                      waiting=self._pause_for_load, poll_s=LOAD_POLL_S)
         except WorkerGone as err:
             # A child ended during the node's stop (or by a signal to its session) is not
             # a death to log.

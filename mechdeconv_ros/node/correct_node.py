@@ -127,7 +127,7 @@ class CorrectNode(Node):
         # The check reads the model frames use now; its result is rebound whole (diagnostics).
         self._check = CheckThread(
             self, self._live.value, lambda: getattr(self._live.status().active, 'model', None),
-            lambda entries: setattr(self._stats, 'check', entries))
+            lambda entries: setattr(self._stats, 'check', entries), self._stats.extra)
         self._check.start()
         self._rebuild_trigger = self.create_guard_condition(self._live.start_requested_rebuild)
         self._live.start()
@@ -245,7 +245,8 @@ class CorrectNode(Node):
             if clock is not None:
                 clock.mark('publish_info_rect')
             if not isinstance(active.rectifier, MovingRectifier):
-                self._check.offer(out.pixels, model)    # a copy, at most check.rate_hz
+                # A copy, at most check.rate_hz, only while the frame path is not busy.
+                self._check.offer(out.pixels, model, time.perf_counter() - start)
             self._maps.frame_done(active.rectifier, encoding.name,
                                   1 if pixels.ndim == 2 else int(pixels.shape[2]), colours,
                                   bool(encoding.depth))
