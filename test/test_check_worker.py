@@ -116,7 +116,7 @@ def test_no_orphan_when_the_parent_is_killed() -> None:
 
 def test_a_paused_child_waits_then_answers_and_stops_at_once(
         worker: CheckWorker, models: tuple[object, object]) -> None:
-    """The node pauses a check (SIGSTOP) while its frame path is busy (imaging/frame_load)."""
+    """The node pauses a check (SIGSTOP) while the CPUs are busy (imaging/check_gate.py)."""
     model = models[0]
     blank = featureless(Lens('fisheye'))
     child = psutil.Process(worker.process.pid)

@@ -4,14 +4,14 @@
 The node's live self-check: a coordinator thread here, the work in a child process (issue 26).
 
 At most ``check.rate_hz`` times a second, counted from the end of the last check (0 = off),
-and only while the frame path's load (the busy fraction of its last second,
-:mod:`~mechdeconv_ros.imaging.frame_load`) is at most ``check.max_load``, the frame callback
-hands over a COPY of a corrected frame with the model that made it (:meth:`CheckThread.offer`:
-one ``exp`` per frame, and at a check a dict swap and one ``np.copy``). A check in progress
+and only while the machine's CPU load (its busy fraction over the last second, niced work
+such as the check's own not counted: :mod:`~mechdeconv_ros.imaging.check_gate`) is at most
+``check.max_load``, the frame callback hands over a COPY of a corrected frame with the model
+that made it (:meth:`CheckThread.offer`: a dict swap and one ``np.copy``). A check in progress
 when the load rises above ``check.max_load`` is paused (SIGSTOP to its process) until the load
 is below 0.8 of it: an idle-priority process still shares the memory bus and the cache, and
-on a node paced at its serial bound it cost 4-5 % of the frames (``check_deferred`` and
-``check_pauses`` in ``/diagnostics`` count what the gate held back).
+on a node paced at its serial bound it cost 4-5 % of the frames (``check_deferred``,
+``check_pauses`` and ``check_cpu_load`` in ``/diagnostics`` show what the gate did).
 
 The thread (nice 19 on Linux) sends the frame to the check's child process
 (:mod:`~mechdeconv_ros.imaging.check_worker`: nice 19, no ROS in it; started with the
@@ -45,8 +45,8 @@ import threading
 import time
 from typing import Any, Callable
 
+from mechdeconv_ros.imaging.check_gate import LoadGate
 from mechdeconv_ros.imaging.check_worker import CheckWorker, WorkerGone
-from mechdeconv_ros.imaging.frame_load import LoadGate
 from mechdeconv_ros.imaging.plumb_check import CheckResult, ESTIMATED, to_apply
 import numpy as np
 from rclpy.parameter import Parameter
@@ -89,15 +89,15 @@ class CheckThread:
         :param current_model: returns the node's active model (None before the first frame).
         :param publish: receives the /diagnostics entries after each check.
         :param counters: /diagnostics entries updated here (``check_deferred`` by the frame
-            path, ``check_pauses`` by this thread); both keys are set now, so the diagnostics
-            timer never sees the dict change size.
+            path, ``check_pauses`` and ``check_cpu_load`` by this thread); the keys are set
+            now, so the diagnostics timer never sees the dict change size.
         """
         self._node, self._value, self._current_model = node, value, current_model
         self._publish = publish
         self._counters = counters
-        counters.update(check_deferred=0, check_pauses=0)
-        # The frame path's load: written by the executor thread (offer), read by this
-        # thread while it waits for a paused check (one float: no lock needed).
+        counters.update(check_deferred=0, check_pauses=0, check_cpu_load=0.0)
+        # The machine's load: read and written by this thread, read by the frame path
+        # (offer: one float, no lock needed).
         self._gate = LoadGate()
         self.pauses = 0
         self._lock = threading.Lock()
@@ -136,26 +136,24 @@ class CheckThread:
         process = self._worker.process
         return None if process is None else process.pid
 
-    def offer(self, corrected: np.ndarray, model: Any, busy_s: float) -> None:
+    def offer(self, corrected: np.ndarray, model: Any) -> None:
         """
         Hand over a corrected frame, if the rate, the load and the thread allow (frame path).
 
-        Every frame of a static model comes here (executor thread): its busy time feeds the
-        frame path's load (:mod:`~mechdeconv_ros.imaging.frame_load`). Above
-        ``check.max_load`` no check starts (the next chance is a period later); a check in
+        Every frame of a static model comes here (executor thread). Above ``check.max_load``
+        (the machine's load, :mod:`~mechdeconv_ros.imaging.check_gate`, read by this
+        object's thread) no check starts: the next chance is a period later. A check in
         progress is paused by the thread (:meth:`_pause_for_load`).
 
         :param corrected: the corrected frame (copied here when taken).
         :param model: the model that corrected it.
-        :param busy_s: seconds this frame has kept the frame path busy so far.
         """
-        now = time.monotonic()
-        load = self._gate.load.add(busy_s, now)
         rate = float(self._value('check.rate_hz'))
+        now = time.monotonic()
         if rate <= 0.0 or self._busy or now - self._last_offer < 1.0 / rate:
             return
         self._last_offer = now
-        if not self._gate.may_start(load, float(self._value('check.max_load'))):
+        if not self._gate.may_start(float(self._value('check.max_load'))):
             self._counters['check_deferred'] = self._gate.deferred
             return
         with self._lock:
@@ -163,17 +161,21 @@ class CheckThread:
             self._busy = True
         self._wake.set()
 
+    def _sample_load(self) -> None:
+        """Read the machine's load if its period has passed (this thread only)."""
+        self._counters['check_cpu_load'] = self._gate.sample(time.monotonic())
+
     def _pause_for_load(self) -> None:
         """
-        Pause or continue the check's process from the frame path's load (this thread).
+        Pause or continue the check's process from the machine's load (this thread).
 
         Called every :data:`LOAD_POLL_S` while a check's reply has not come (never while a
         frame is being sent: a stopped process would stop the send). Never waits for the stop
         lock: a stop in progress continues the process itself.
         """
+        self._sample_load()
         worker = self._worker
-        paused = self._gate.should_pause(self._gate.load.value(time.monotonic()),
-                                         float(self._value('check.max_load')), worker.paused)
+        paused = self._gate.should_pause(float(self._value('check.max_load')), worker.paused)
         if paused == worker.paused or not self._worker_lock.acquire(blocking=False):
             return
         try:
@@ -193,7 +195,9 @@ class CheckThread:
         if float(self._value('check.rate_hz')) > 0.0:
             self._start_worker()     # now, not at the first check: its imports take a second
         while not self._stop:
-            if not self._wake.wait(WAIT_S):
+            woke = self._wake.wait(WAIT_S)
+            self._sample_load()     # every WAIT_S at least: the gate's load stays fresh
+            if not woke:
                 self._stop_worker_if_off()
                 continue
             self._wake.clear()

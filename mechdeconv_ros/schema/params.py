@@ -373,10 +373,11 @@ SCHEMA: tuple[ParamSpec, ...] = (
        'Largest rate of the straight-edge self-check, a low-priority child process on a copy '
        'of a corrected frame (never on the frame path); 0 = off (the process stops).', 0.0,
        10.0),
-    _d('check.max_load', 0.6, '1',
-       'Busiest the frame path may be (fraction of the last second its callback ran) for a '
-       'check to start; above it a check waits, and one in progress is paused (SIGSTOP) '
-       'until the load falls: the frames come first. 1 = never held back.', 0.05, 1.0),
+    _d('check.max_load', 0.75, '1',
+       'Busiest the CPUs may be (fraction of all cores over the last second; niced work, '
+       'the check\'s own included, counts as idle) for a check to start; above it a check '
+       'waits, and one in progress is paused (SIGSTOP) until the load is below 0.8 of it: '
+       'the frames come first. 1 = never held back.', 0.05, 1.0),
     _i('check.window', 5, '1',
        'Frames whose straight edges the check and its estimate pool (the last N checked).',
        1, 100),
