@@ -375,7 +375,7 @@ SCHEMA: tuple[ParamSpec, ...] = (
        10.0),
     _d('check.max_load', 0.75, '1',
        'Busiest the CPUs may be (fraction of all cores over the last second; niced work, '
-       'the check\'s own included, counts as idle) for a check to start; above it a check '
+       'the check process included, counts as idle) for a check to start; above it a check '
        'waits, and one in progress is paused (SIGSTOP) until the load is below 0.8 of it: '
        'the frames come first. 1 = never held back.', 0.05, 1.0),
     _i('check.window', 5, '1',
