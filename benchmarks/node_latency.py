@@ -96,12 +96,19 @@ HIGH_RATE_HZ = 60.0
 WARMUP_S = 1.0
 WINDOW_PACED_S = 4.0
 WINDOW_SHORT_S = 3.0
+#: Phase steps of the parameter sets over the frame period (:func:`set_pause_s`).
+GOLDEN_STEP = (math.sqrt(5.0) - 1.0) / 2.0
 SET_REPEATS = 20          # the issue-28 target is a median of 20 sets at 1080p
 SET_VALUES = (0.5, 0.2)
 STOP_OFFSET = 'lens.stop_offset_mm'
 #: What the probe reads from correct_node's /diagnostics.
+#: Extra node parameters for an A/B run, e.g. ``MECHDECONV_BENCH_NODE_PARAMS='check.rate_hz:=0.0'``
+#: (space-separated ``name:=value``; the children inherit it).
+NODE_PARAMS_ENV = 'MECHDECONV_BENCH_NODE_PARAMS'
+#: The node's self-check counters (issue 26): what its gate did during a window.
+CHECK_KEYS = ('checks', 'check_deferred', 'check_pauses')
 DIAGNOSTIC_KEYS = ('frame_time_ms_mean', 'frame_time_ms_max', 'last_rebuild_ms',
-                   'decode_time_ms_mean')
+                   'decode_time_ms_mean', 'check_cpu_load', *CHECK_KEYS)
 #: Readiness and first-frame waits, s.
 READY_TIMEOUT_S = 20.0
 FIRST_FRAME_TIMEOUT_S = 6.0
@@ -147,9 +154,10 @@ def start_child(argv: Sequence[str], env: Mapping[str, str], log_dir: Path,
 def node_argv(kind: str) -> list[str]:
     """Return the command of the node under test (``'node'``) or of the pass-through."""
     if kind == 'node':
+        extra = [a for p in os.environ.get(NODE_PARAMS_ENV, '').split() for a in ('-p', p)]
         return [sys.executable, '-m', 'mechdeconv_ros.node.correct_node', '--ros-args',
                 '--params-file', str(CASE2_YAML), '-p', 'sensor.width_px:=0',
-                '-p', 'sensor.height_px:=0']
+                '-p', 'sensor.height_px:=0', *extra]
     return [sys.executable, '-m', 'benchmarks.passthrough_node']
 
 
@@ -475,6 +483,14 @@ def _measure_once(probe: Probe, kind_proc: Child, pub: Child, seconds: float) ->
         # correct_node's own time per frame (receive conversion to the last publish), as the
         # 1 s means of its /diagnostics.
         stats['node_callback_ms'] = statistics.median(callback)
+    load = probe.diagnostics_since(wall0, 'check_cpu_load')
+    if load:
+        # The check's gate (a node with the check on): the machine's load it read, and how
+        # many checks ran, were not started, or were paused during the window.
+        stats['check'] = {'cpu_load_median': statistics.median(load)}
+        for key in CHECK_KEYS:
+            seen = probe.diagnostics_since(wall0, key)
+            stats['check'][key] = max(seen) - min(seen) if seen else 0
     return stats
 
 
@@ -534,6 +550,23 @@ def _throughput_target_fps(doc: Mapping[str, Any], size: str) -> float:
     return serial_bound_fps(passthrough['fps'], doc['bare_remap'][size]['median_ms'])
 
 
+def set_pause_s(i: int) -> float:
+    """
+    Return the pause after the ``i``-th parameter set: 0.3 s plus a share of a frame period.
+
+    The reaction (reply -> first frame of the new model) depends on where in the camera's
+    frame period the rebuild ends: it is about one frame period longer when a frame arrives
+    just before the new model is ready. With a fixed pause every set of a run fell at nearly
+    the same phase, and the median of 20 was 25 ms in one run and 46 ms in the next with the
+    same node (bimodal, 2026-11-27). The shares ``i * 0.618... mod 1`` (golden-ratio steps)
+    spread the sets evenly over the period, so the median is that of the phases, not of luck.
+
+    :param i: the set's index.
+    :return: seconds.
+    """
+    return 0.3 + ((i * GOLDEN_STEP) % 1.0) / RATE_HZ
+
+
 def _set_parameters_test(probe: Probe, doc: dict[str, Any], size: str, repeats: int) -> None:
     """Set the stop offset ``repeats`` times; record reply -> first new frame and rebuilds."""
     set_start = time.monotonic()
@@ -541,7 +574,7 @@ def _set_parameters_test(probe: Probe, doc: dict[str, Any], size: str, repeats: 
         result = probe.set_stop_offset(SET_VALUES[i % len(SET_VALUES)])
         result['size'] = size
         doc['set_parameters'].append(result)
-        probe.spin_for(0.3)
+        probe.spin_for(set_pause_s(i))
     probe.spin_for(1.2)
     doc['node_rebuild_ms'][size] = probe.diagnostics_since(set_start + 0.5, 'last_rebuild_ms')
     done = [r['reply_to_first_new_frame_ms'] for r in doc['set_parameters']
