@@ -245,8 +245,7 @@ class CorrectNode(Node):
             if clock is not None:
                 clock.mark('publish_info_rect')
             if not isinstance(active.rectifier, MovingRectifier):
-                # A copy, at most check.rate_hz, only while the CPUs are not busy.
-                self._check.offer(out.pixels, model)
+                self._check.offer(out.pixels, model)    # a copy, at most check.rate_hz
             self._maps.frame_done(active.rectifier, encoding.name,
                                   1 if pixels.ndim == 2 else int(pixels.shape[2]), colours,
                                   bool(encoding.depth))
