@@ -6,12 +6,12 @@ The node's straight-edge check (issue 26): /diagnostics, WARN, check.apply; one 
 The node corrects fisheye frames rendered with the axis 16 px right and 12 px down
 (test/check_scenes.py) while its description says centred. Its check (check.rate_hz 0.4
 for the test: checks further apart than the diagnostics period) must publish what the same
-check computes in-process, WARN, and with ``check.apply`` set the offset on itself (``get_parameters`` shows it) within the tolerance
-of the truth; every output frame equals the in-process correction by the model of its own
-camera_info (no frame mixes two models). The check runs in a child process of the node at
-nice 19 (imaging/check_worker.py): restarted when it dies, not stopped by SIGINT to the
-node's group, gone when the node has exited (0); held back while the machine's CPUs are busier
-than ``check.max_load``.
+check computes in-process, WARN, and with ``check.apply`` set the offset on itself
+(``get_parameters`` shows it) within the tolerance of the truth; every output frame equals
+the in-process correction by the model of its own camera_info (no frame mixes two models).
+The check runs in a child process of the node at nice 19 (imaging/check_worker.py):
+restarted when it dies, not stopped by SIGINT to the node's group, gone when the node has
+exited (0); held back while the machine's CPUs are busier than ``check.max_load``.
 """
 
 from __future__ import annotations
