@@ -94,6 +94,8 @@ RATE_HZ = 30.0
 #: A camera rate above what a Python relay sustains at 1080p, paced (not flooding).
 HIGH_RATE_HZ = 60.0
 WARMUP_S = 1.0
+#: The warm-up of the quick (smoke) run's windows, s.
+QUICK_WARMUP_S = 0.3
 WINDOW_PACED_S = 4.0
 WINDOW_SHORT_S = 3.0
 #: Phase steps of the parameter sets over the frame period (:func:`set_pause_s`).
@@ -500,7 +502,8 @@ def _stalled(stats: Mapping[str, Any]) -> bool:
 
 
 def _run_window(probe: Probe, kind_proc: Child, pub: Child, seconds: float,
-                retries: int = MAX_RETRIES, stalls: bool = True) -> dict[str, Any]:
+                retries: int = MAX_RETRIES, stalls: bool = True,
+                warmup_s: float = WARMUP_S) -> dict[str, Any]:
     """
     Warm up, then measure a window; measure again while other processes were busy.
 
@@ -513,7 +516,7 @@ def _run_window(probe: Probe, kind_proc: Child, pub: Child, seconds: float,
     ``discarded``.
     """
     got_first = probe.first_frame(FIRST_FRAME_TIMEOUT_S)
-    probe.spin_for(WARMUP_S)
+    probe.spin_for(warmup_s)
 
     def disturbed(stats: Mapping[str, Any]) -> bool:
         return stats['others_cores'] > BUSY_OTHERS_CORES or (stalls and _stalled(stats))
@@ -587,6 +590,7 @@ def child_main(transport: str, quick: bool, out_json: Path) -> int:
     """Measure one transport (this process's Fast DDS profile is fixed by its environment)."""
     sizes = QUICK_SIZES if quick else SIZES
     paced_s, short_s = (0.6, 0.6) if quick else (WINDOW_PACED_S, WINDOW_SHORT_S)
+    warmup_s = QUICK_WARMUP_S if quick else WARMUP_S
     rates = (RATE_HZ,) if transport == 'default' else (RATE_HZ, HIGH_RATE_HZ, 0.0)
     if quick:
         rates = (RATE_HZ,)
@@ -606,6 +610,12 @@ def child_main(transport: str, quick: bool, out_json: Path) -> int:
     probe = Probe(domain)
     running: list[Child] = []
 
+    def start_publisher(name: str, rate: float, label: str) -> Child:
+        pub = start_child(publisher_argv(width, height, rate), env, log_dir,
+                          f'publisher_{name}_{label.replace(" ", "_")}')
+        running.append(pub)
+        return pub
+
     def stop(proc: Child) -> None:
         code = proc.stop()
         if proc in running:
@@ -622,6 +632,9 @@ def child_main(transport: str, quick: bool, out_json: Path) -> int:
                 name = f'{kind}_{size}'
                 kind_proc = start_child(node_argv(kind), env, log_dir, name)
                 running.append(kind_proc)
+                # Quick (one window, 30 Hz): the publisher starts with the relay, as in
+                # benchmarks.stages, so their start-ups overlap instead of adding up.
+                early = start_publisher(name, RATE_HZ, f'{RATE_HZ:g} Hz') if quick else None
                 if not probe.ready(READY_TIMEOUT_S):
                     doc['errors'].append(f'{name}: not ready after {READY_TIMEOUT_S} s: '
                                          f'{kind_proc.tail()}')
@@ -634,13 +647,14 @@ def child_main(transport: str, quick: bool, out_json: Path) -> int:
                     if math.isfinite(target):
                         kind_rates.insert(-1, (target, TARGET_RATE))
                 for rate, label in kind_rates:
-                    pub = start_child(publisher_argv(width, height, rate), env, log_dir,
-                                      f'publisher_{name}_{label.replace(" ", "_")}')
-                    running.append(pub)
+                    if early is not None and rate == RATE_HZ:
+                        pub, early = early, None
+                    else:
+                        pub = start_publisher(name, rate, label)
                     stats = _run_window(probe, kind_proc, pub,
                                         paced_s if rate == RATE_HZ else short_s,
                                         0 if quick else MAX_RETRIES,
-                                        stalls=transport == 'shm')
+                                        stalls=transport == 'shm', warmup_s=warmup_s)
                     if kind == 'node' and transport == 'shm' and rate == RATE_HZ:
                         # With the 30 Hz stream still running, before any flood (a flat-out
                         # publisher can leave the shared-memory transport hiccuping for a
@@ -757,7 +771,8 @@ def run(out_dir: Path = RESULTS, quick: bool = False, plots: bool = True,
     Run the node benchmark; write ``node_latency.json`` (and the figure) into ``out_dir``.
 
     :param out_dir: results folder.
-    :param quick: one small size, short windows, shm only unless ``transports`` says more.
+    :param quick: one small size, one 30 Hz window per relay (its publisher started with
+        it), short windows and warm-ups, shm only unless ``transports`` says more.
     :param plots: write the PNG figure.
     :param transports: which transports to measure.
     :return: the results document.
@@ -801,7 +816,8 @@ def run(out_dir: Path = RESULTS, quick: bool = False, plots: bool = True,
                       'flat_out_min_cores': FLAT_OUT_MIN_CORES,
                       'flat_out_share': FLAT_OUT_SHARE},
         'windows_s': {'paced_30hz': 0.6 if quick else WINDOW_PACED_S,
-                      'other': 0.6 if quick else WINDOW_SHORT_S, 'warmup': WARMUP_S},
+                      'other': 0.6 if quick else WINDOW_SHORT_S,
+                      'warmup': QUICK_WARMUP_S if quick else WARMUP_S},
         'children': children,
         'targets': evaluate(children),
         'errors': errors,
