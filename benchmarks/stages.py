@@ -55,7 +55,7 @@ from typing import Any, Mapping, Sequence
 
 from benchmarks.common import LoadMonitor, log, RESULTS
 from benchmarks.node_latency import (
-    latency_stats, node_argv, node_remap, Probe, publisher_argv, ros_env,
+    announcing_probe, latency_stats, node_argv, node_remap, Probe, publisher_argv, ros_env,
     start_child)
 from benchmarks.report import (
     fmt_ms, fmt_num, machine_info, machine_line, markdown_table, verdict, write_json)
@@ -322,14 +322,15 @@ def child_main(quick: bool, out_json: Path, baseline: str = '',
     rounds, window_s, warmup_s = (1, 0.6, 0.2) if quick else (ROUNDS, WINDOW_S, WARMUP_S)
     env = dict(os.environ)
     doc: dict[str, Any] = {'bare_remap': {}, 'traffic': {}, 'runs': [], 'errors': []}
-    # Quick: the probe first, so that its first seconds (a probe younger than about 3 s
-    # discovered the first relay 2 s later) pass during the bare remap.
-    early = Probe(int(env['ROS_DOMAIN_ID']), name='stage_probe') if quick else None
+    log_dir = Path(tempfile.mkdtemp(prefix='mechdeconv_bench_stages_'))
+    doc['log_dir'] = str(log_dir)
+    # Quick: the probe first (its first seconds pass during the bare remap), announcing often
+    # (node_latency.announcing_probe: each rung's start-up waited 0-3 s for discovery).
+    early = (announcing_probe(int(env['ROS_DOMAIN_ID']), log_dir, name='stage_probe')
+             if quick else None)
     for width, height in sizes:
         doc['bare_remap'][f'{width}x{height}'] = bare_remap(width, height, 6 if quick else 90)
         doc['traffic'][f'{width}x{height}'] = frame_traffic(width, height, 3 if quick else 15)
-    log_dir = Path(tempfile.mkdtemp(prefix='mechdeconv_bench_stages_'))
-    doc['log_dir'] = str(log_dir)
     probe = early or Probe(int(env['ROS_DOMAIN_ID']), name='stage_probe')
     shared_pub: Child | None = None
     try:
