@@ -642,11 +642,11 @@ def child_main(transport: str, quick: bool, out_json: Path) -> int:
     log_dir = Path(tempfile.mkdtemp(prefix=f'mechdeconv_bench_{transport}_'))
     doc['log_dir'] = str(log_dir)
     # Quick: the probe first (its first seconds pass during the bare remap), announcing often.
-    early = announcing_probe(domain, log_dir) if quick else None
+    early_probe = announcing_probe(domain, log_dir) if quick else None
     for width, height in sizes:
         doc['bare_remap'][f'{width}x{height}'] = bare_remap_ms(
             width, height, 5 if quick else 40)
-    probe = early or Probe(domain)
+    probe = early_probe or Probe(domain)
     running: list[Child] = []
 
     def start_publisher(name: str, rate: float, label: str) -> Child:
@@ -673,7 +673,8 @@ def child_main(transport: str, quick: bool, out_json: Path) -> int:
                 running.append(kind_proc)
                 # Quick (one window, 30 Hz): the publisher starts with the relay, as in
                 # benchmarks.stages, so their start-ups overlap instead of adding up.
-                early = start_publisher(name, RATE_HZ, f'{RATE_HZ:g} Hz') if quick else None
+                first_pub = (start_publisher(name, RATE_HZ, f'{RATE_HZ:g} Hz') if quick
+                             else None)
                 if not probe.ready(READY_TIMEOUT_S):
                     doc['errors'].append(f'{name}: not ready after {READY_TIMEOUT_S} s: '
                                          f'{kind_proc.tail()}')
@@ -686,8 +687,8 @@ def child_main(transport: str, quick: bool, out_json: Path) -> int:
                     if math.isfinite(target):
                         kind_rates.insert(-1, (target, TARGET_RATE))
                 for rate, label in kind_rates:
-                    if early is not None and rate == RATE_HZ:
-                        pub, early = early, None
+                    if first_pub is not None and rate == RATE_HZ:
+                        pub, first_pub = first_pub, None
                     else:
                         pub = start_publisher(name, rate, label)
                     stats = _run_window(probe, kind_proc, pub,

@@ -326,12 +326,12 @@ def child_main(quick: bool, out_json: Path, baseline: str = '',
     doc['log_dir'] = str(log_dir)
     # Quick: the probe first (its first seconds pass during the bare remap), announcing often
     # (node_latency.announcing_probe: each rung's start-up waited 0-3 s for discovery).
-    early = (announcing_probe(int(env['ROS_DOMAIN_ID']), log_dir, name='stage_probe')
-             if quick else None)
+    early_probe = (announcing_probe(int(env['ROS_DOMAIN_ID']), log_dir, name='stage_probe')
+                   if quick else None)
     for width, height in sizes:
         doc['bare_remap'][f'{width}x{height}'] = bare_remap(width, height, 6 if quick else 90)
         doc['traffic'][f'{width}x{height}'] = frame_traffic(width, height, 3 if quick else 15)
-    probe = early or Probe(int(env['ROS_DOMAIN_ID']), name='stage_probe')
+    probe = early_probe or Probe(int(env['ROS_DOMAIN_ID']), name='stage_probe')
     shared_pub: Child | None = None
     try:
         for width, height in sizes:
