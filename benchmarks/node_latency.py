@@ -94,6 +94,8 @@ RATE_HZ = 30.0
 #: A camera rate above what a Python relay sustains at 1080p, paced (not flooding).
 HIGH_RATE_HZ = 60.0
 WARMUP_S = 1.0
+#: The warm-up of the quick (smoke) run's windows, s.
+QUICK_WARMUP_S = 0.3
 WINDOW_PACED_S = 4.0
 WINDOW_SHORT_S = 3.0
 #: Phase steps of the parameter sets over the frame period (:func:`set_pause_s`).
@@ -381,6 +383,43 @@ class Probe:
         self._rclpy.try_shutdown(context=self.context)
 
 
+def announcing_probe(domain_id: int, folder: Path, name: str = 'bench_probe') -> Probe:
+    """
+    Return a probe whose participant announces itself every 0.5 s (quick runs).
+
+    A newly started relay was discovered by the probe only at one of the probe's own periodic
+    participant announcements (Fast DDS: every 3 s): each start-up waited 0-3 s for
+    ``ready``. This process's profile (read once per process, at its first participant) is
+    the package's (``FASTRTPS_DEFAULT_PROFILES_FILE``) with a 0.5 s announcement period,
+    written into ``folder``; the processes under test keep the package's profile (their
+    environment is a copy taken before).
+
+    :param domain_id: the ROS domain.
+    :param folder: where the profile is written.
+    :param name: the probe node's name.
+    :return: the probe.
+    """
+    import xml.etree.ElementTree as ET
+
+    from mechdeconv_ros.node.process_env import PROFILE_VAR
+    source = os.environ.get(PROFILE_VAR)
+    if source:
+        namespace = 'http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles'
+        ET.register_namespace('', namespace)
+        tree = ET.parse(source)
+        rtps = tree.getroot().find(f'.//{{{namespace}}}participant/{{{namespace}}}rtps')
+        if rtps is not None and rtps.find(f'{{{namespace}}}builtin') is None:
+            config = ET.SubElement(ET.SubElement(rtps, f'{{{namespace}}}builtin'),
+                                   f'{{{namespace}}}discovery_config')
+            lease = ET.SubElement(config, f'{{{namespace}}}leaseAnnouncement')
+            ET.SubElement(lease, f'{{{namespace}}}sec').text = '0'
+            ET.SubElement(lease, f'{{{namespace}}}nanosec').text = '500000000'
+            path = folder / 'probe_fastdds.xml'
+            tree.write(path, encoding='UTF-8', xml_declaration=True)
+            os.environ[PROFILE_VAR] = str(path)
+    return Probe(domain_id, name=name)
+
+
 def latency_stats(frames: Sequence[tuple[int, int]], seconds: float,
                   window_ns: tuple[int, int] | None = None) -> dict[str, Any]:
     """
@@ -500,7 +539,8 @@ def _stalled(stats: Mapping[str, Any]) -> bool:
 
 
 def _run_window(probe: Probe, kind_proc: Child, pub: Child, seconds: float,
-                retries: int = MAX_RETRIES, stalls: bool = True) -> dict[str, Any]:
+                retries: int = MAX_RETRIES, stalls: bool = True,
+                warmup_s: float = WARMUP_S) -> dict[str, Any]:
     """
     Warm up, then measure a window; measure again while other processes were busy.
 
@@ -513,7 +553,7 @@ def _run_window(probe: Probe, kind_proc: Child, pub: Child, seconds: float,
     ``discarded``.
     """
     got_first = probe.first_frame(FIRST_FRAME_TIMEOUT_S)
-    probe.spin_for(WARMUP_S)
+    probe.spin_for(warmup_s)
 
     def disturbed(stats: Mapping[str, Any]) -> bool:
         return stats['others_cores'] > BUSY_OTHERS_CORES or (stalls and _stalled(stats))
@@ -587,6 +627,7 @@ def child_main(transport: str, quick: bool, out_json: Path) -> int:
     """Measure one transport (this process's Fast DDS profile is fixed by its environment)."""
     sizes = QUICK_SIZES if quick else SIZES
     paced_s, short_s = (0.6, 0.6) if quick else (WINDOW_PACED_S, WINDOW_SHORT_S)
+    warmup_s = QUICK_WARMUP_S if quick else WARMUP_S
     rates = (RATE_HZ,) if transport == 'default' else (RATE_HZ, HIGH_RATE_HZ, 0.0)
     if quick:
         rates = (RATE_HZ,)
@@ -598,13 +639,21 @@ def child_main(transport: str, quick: bool, out_json: Path) -> int:
                            'malloc_env': {k: env.get(k) for k in MALLOC_ENV},
                            'bare_remap': {}, 'runs': [], 'set_parameters': [],
                            'node_rebuild_ms': {}, 'exit_codes': [], 'errors': []}
+    log_dir = Path(tempfile.mkdtemp(prefix=f'mechdeconv_bench_{transport}_'))
+    doc['log_dir'] = str(log_dir)
+    # Quick: the probe first (its first seconds pass during the bare remap), announcing often.
+    early_probe = announcing_probe(domain, log_dir) if quick else None
     for width, height in sizes:
         doc['bare_remap'][f'{width}x{height}'] = bare_remap_ms(
             width, height, 5 if quick else 40)
-    log_dir = Path(tempfile.mkdtemp(prefix=f'mechdeconv_bench_{transport}_'))
-    doc['log_dir'] = str(log_dir)
-    probe = Probe(domain)
+    probe = early_probe or Probe(domain)
     running: list[Child] = []
+
+    def start_publisher(name: str, rate: float, label: str) -> Child:
+        pub = start_child(publisher_argv(width, height, rate), env, log_dir,
+                          f'publisher_{name}_{label.replace(" ", "_")}')
+        running.append(pub)
+        return pub
 
     def stop(proc: Child) -> None:
         code = proc.stop()
@@ -622,6 +671,10 @@ def child_main(transport: str, quick: bool, out_json: Path) -> int:
                 name = f'{kind}_{size}'
                 kind_proc = start_child(node_argv(kind), env, log_dir, name)
                 running.append(kind_proc)
+                # Quick (one window, 30 Hz): the publisher starts with the relay, as in
+                # benchmarks.stages, so their start-ups overlap instead of adding up.
+                first_pub = (start_publisher(name, RATE_HZ, f'{RATE_HZ:g} Hz') if quick
+                             else None)
                 if not probe.ready(READY_TIMEOUT_S):
                     doc['errors'].append(f'{name}: not ready after {READY_TIMEOUT_S} s: '
                                          f'{kind_proc.tail()}')
@@ -634,13 +687,14 @@ def child_main(transport: str, quick: bool, out_json: Path) -> int:
                     if math.isfinite(target):
                         kind_rates.insert(-1, (target, TARGET_RATE))
                 for rate, label in kind_rates:
-                    pub = start_child(publisher_argv(width, height, rate), env, log_dir,
-                                      f'publisher_{name}_{label.replace(" ", "_")}')
-                    running.append(pub)
+                    if first_pub is not None and rate == RATE_HZ:
+                        pub, first_pub = first_pub, None
+                    else:
+                        pub = start_publisher(name, rate, label)
                     stats = _run_window(probe, kind_proc, pub,
                                         paced_s if rate == RATE_HZ else short_s,
                                         0 if quick else MAX_RETRIES,
-                                        stalls=transport == 'shm')
+                                        stalls=transport == 'shm', warmup_s=warmup_s)
                     if kind == 'node' and transport == 'shm' and rate == RATE_HZ:
                         # With the 30 Hz stream still running, before any flood (a flat-out
                         # publisher can leave the shared-memory transport hiccuping for a
@@ -757,7 +811,8 @@ def run(out_dir: Path = RESULTS, quick: bool = False, plots: bool = True,
     Run the node benchmark; write ``node_latency.json`` (and the figure) into ``out_dir``.
 
     :param out_dir: results folder.
-    :param quick: one small size, short windows, shm only unless ``transports`` says more.
+    :param quick: one small size, one 30 Hz window per relay (its publisher started with
+        it), short windows and warm-ups, shm only unless ``transports`` says more.
     :param plots: write the PNG figure.
     :param transports: which transports to measure.
     :return: the results document.
@@ -801,7 +856,8 @@ def run(out_dir: Path = RESULTS, quick: bool = False, plots: bool = True,
                       'flat_out_min_cores': FLAT_OUT_MIN_CORES,
                       'flat_out_share': FLAT_OUT_SHARE},
         'windows_s': {'paced_30hz': 0.6 if quick else WINDOW_PACED_S,
-                      'other': 0.6 if quick else WINDOW_SHORT_S, 'warmup': WARMUP_S},
+                      'other': 0.6 if quick else WINDOW_SHORT_S,
+                      'warmup': QUICK_WARMUP_S if quick else WARMUP_S},
         'children': children,
         'targets': evaluate(children),
         'errors': errors,

@@ -55,7 +55,7 @@ from typing import Any, Mapping, Sequence
 
 from benchmarks.common import LoadMonitor, log, RESULTS
 from benchmarks.node_latency import (
-    latency_stats, node_argv, node_remap, Probe, publisher_argv, ros_env,
+    announcing_probe, latency_stats, node_argv, node_remap, Probe, publisher_argv, ros_env,
     start_child)
 from benchmarks.report import (
     fmt_ms, fmt_num, machine_info, machine_line, markdown_table, verdict, write_json)
@@ -251,10 +251,12 @@ def _median(values: Sequence[float]) -> float:
 
 def measure_rung(probe: Probe, rung: str, width: int, height: int, env: Mapping[str, str],
                  log_dir: Path, window_s: float, warmup_s: float, tag: str,
-                 baseline: str = '') -> dict[str, Any]:
+                 baseline: str = '', shared_pub: Child | None = None) -> dict[str, Any]:
     """
     Run one rung between the publisher and the probe for one window; return its figures.
 
+    :param shared_pub: a running 30 Hz publisher of this size to use (and leave running);
+        None: start one for this rung and stop it after the window.
     :return: p50 latency, fps, stage medians, CPU per frame by thread group, exit codes.
     """
     stage_file = log_dir / f'stages_{tag}.json'
@@ -263,7 +265,7 @@ def measure_rung(probe: Probe, rung: str, width: int, height: int, env: Mapping[
     relay = start_child(_rung_argv(rung, baseline), env, log_dir, f'{rung}_{tag}')
     # The publisher starts while the relay does (its frames before the relay subscribes are
     # simply not received): the two start-ups overlap instead of adding up.
-    pub: Child | None = start_child(publisher_argv(width, height, RATE_HZ), env, log_dir,
+    pub = shared_pub or start_child(publisher_argv(width, height, RATE_HZ), env, log_dir,
                                     f'pub_{tag}')
     try:
         if not probe.ready(READY_TIMEOUT_S):
@@ -286,7 +288,7 @@ def measure_rung(probe: Probe, rung: str, width: int, height: int, env: Mapping[
                                       for k, v in thread_groups(relay.pid, cpu0, cpu1).items()}
     finally:
         for proc in (pub, relay):
-            if proc is not None:
+            if proc is not shared_pub:
                 code = proc.stop()
                 if code != 0 or proc.killed:
                     result['errors'].append(f'{proc.name} exited with {code}: {proc.tail()}')
@@ -320,20 +322,30 @@ def child_main(quick: bool, out_json: Path, baseline: str = '',
     rounds, window_s, warmup_s = (1, 0.6, 0.2) if quick else (ROUNDS, WINDOW_S, WARMUP_S)
     env = dict(os.environ)
     doc: dict[str, Any] = {'bare_remap': {}, 'traffic': {}, 'runs': [], 'errors': []}
+    log_dir = Path(tempfile.mkdtemp(prefix='mechdeconv_bench_stages_'))
+    doc['log_dir'] = str(log_dir)
+    # Quick: the probe first (its first seconds pass during the bare remap), announcing often
+    # (node_latency.announcing_probe: each rung's start-up waited 0-3 s for discovery).
+    early_probe = (announcing_probe(int(env['ROS_DOMAIN_ID']), log_dir, name='stage_probe')
+                   if quick else None)
     for width, height in sizes:
         doc['bare_remap'][f'{width}x{height}'] = bare_remap(width, height, 6 if quick else 90)
         doc['traffic'][f'{width}x{height}'] = frame_traffic(width, height, 3 if quick else 15)
-    log_dir = Path(tempfile.mkdtemp(prefix='mechdeconv_bench_stages_'))
-    doc['log_dir'] = str(log_dir)
-    probe = Probe(int(env['ROS_DOMAIN_ID']), name='stage_probe')
+    probe = early_probe or Probe(int(env['ROS_DOMAIN_ID']), name='stage_probe')
+    shared_pub: Child | None = None
     try:
         for width, height in sizes:
+            if quick:
+                # One publisher for every rung (the full run starts one per rung): a
+                # start-up and a stop less per rung.
+                shared_pub = start_child(publisher_argv(width, height, RATE_HZ), env,
+                                         log_dir, f'pub_{width}x{height}')
             for index in range(rounds):
                 order = rungs if index % 2 == 0 else tuple(reversed(rungs))
                 for rung in order:
                     tag = f'{width}x{height}_{rung}_{index}'
                     result = measure_rung(probe, rung, width, height, env, log_dir, window_s,
-                                          warmup_s, tag, baseline)
+                                          warmup_s, tag, baseline, shared_pub)
                     result['round'] = index
                     doc['runs'].append(result)
                     doc['errors'] += result['errors']
@@ -342,7 +354,15 @@ def child_main(quick: bool, out_json: Path, baseline: str = '',
                         f"{result.get('p50_ms', math.nan):.2f} ms, stages "
                         + ', '.join(f'{k} {v:.2f}' for k, v in result['stages'].items())
                         + f", others {result.get('others_cores', math.nan):.2f} cores")
+            if shared_pub is not None:
+                code = shared_pub.stop()
+                if code != 0 or shared_pub.killed:
+                    doc['errors'].append(f'{shared_pub.name} exited with {code}: '
+                                         f'{shared_pub.tail()}')
+                shared_pub = None
     finally:
+        if shared_pub is not None:
+            shared_pub.stop()
         probe.close()
         write_json(out_json, doc)
     return 0
@@ -390,7 +410,7 @@ def run(out_dir: Path = RESULTS, quick: bool = False, baseline: str = '',
     Run the stage benchmark in a child process; write ``stages.json`` into ``out_dir``.
 
     :param out_dir: results folder.
-    :param quick: one small size, one round, 0.6 s windows.
+    :param quick: one small size, one round, 0.6 s windows, one publisher for every rung.
     :param baseline: a checkout of the repository whose correct_node runs as one more rung,
         ``baseline`` (before/after comparisons in one run; its stages are timed only if it
         has the stage clock).
