@@ -399,24 +399,10 @@ def announcing_probe(domain_id: int, folder: Path, name: str = 'bench_probe') ->
     :param name: the probe node's name.
     :return: the probe.
     """
-    import xml.etree.ElementTree as ET
-
-    from mechdeconv_ros.node.process_env import PROFILE_VAR
+    from mechdeconv_ros.node.process_env import announcing_profile, PROFILE_VAR
     source = os.environ.get(PROFILE_VAR)
     if source:
-        namespace = 'http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles'
-        ET.register_namespace('', namespace)
-        tree = ET.parse(source)
-        rtps = tree.getroot().find(f'.//{{{namespace}}}participant/{{{namespace}}}rtps')
-        if rtps is not None and rtps.find(f'{{{namespace}}}builtin') is None:
-            config = ET.SubElement(ET.SubElement(rtps, f'{{{namespace}}}builtin'),
-                                   f'{{{namespace}}}discovery_config')
-            lease = ET.SubElement(config, f'{{{namespace}}}leaseAnnouncement')
-            ET.SubElement(lease, f'{{{namespace}}}sec').text = '0'
-            ET.SubElement(lease, f'{{{namespace}}}nanosec').text = '500000000'
-            path = folder / 'probe_fastdds.xml'
-            tree.write(path, encoding='UTF-8', xml_declaration=True)
-            os.environ[PROFILE_VAR] = str(path)
+        os.environ[PROFILE_VAR] = str(announcing_profile(folder, source=Path(source)))
     return Probe(domain_id, name=name)
 
 

@@ -16,6 +16,7 @@ from pathlib import Path
 import signal
 import sys
 import time
+import xml.etree.ElementTree as ET
 
 from mechdeconv_ros.node import process_env
 from mechdeconv_ros.node.process_env import (
@@ -171,3 +172,22 @@ def test_context_manager_kills_a_child_left_running(tmp_path):
         assert wait_for_output(c) == 'ready'
     assert c.returncode == -signal.SIGKILL and gone(c.pid)
     assert 'ready' in c.tail()
+
+
+def test_announcing_profile_keeps_the_transports_and_announces_every_period(
+        tmp_path: Path) -> None:
+    path = process_env.announcing_profile(tmp_path, period_s=0.5)
+    assert path.parent == tmp_path and path != process_env.fastdds_profile()
+    ns = {'f': 'http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles'}
+    ours, package = ET.parse(path).getroot(), ET.parse(process_env.fastdds_profile()).getroot()
+    rtps = ours.find('.//f:participant/f:rtps', ns)
+    lease = rtps.find('f:builtin/f:discovery_config/f:leaseAnnouncement', ns)
+    assert (lease.find('f:sec', ns).text, lease.find('f:nanosec', ns).text) == ('0', '500000000')
+    # Everything else is the package's: the same transports, segment and message sizes.
+    for tag in ('userTransports', 'useBuiltinTransports'):
+        assert ET.tostring(rtps.find(f'f:{tag}', ns)) == ET.tostring(
+            package.find(f'.//f:participant/f:rtps/f:{tag}', ns))
+    assert ET.tostring(ours.find('.//f:transport_descriptors', ns)) == ET.tostring(
+        package.find('.//f:transport_descriptors', ns))
+    # A profile that already sets builtin discovery is used as it is.
+    assert process_env.announcing_profile(tmp_path / 'x', source=path) == path
