@@ -58,7 +58,8 @@ from typing import Any, Mapping
 
 from mechdeconv_ros.optics.prescription import image_plane, paraxial, Prescription
 from mechdeconv_ros.optics.trace3d import (
-    direction_from_cosines, FAILED, lens_system, reversed_system, System, trace_margin, trace_pass)
+    direction_from_cosines, FAILED, lens_system, reversed_system, System, trace_margin, trace_pass,
+    trace_passes)
 import numpy as np
 import numpy.typing as npt
 
@@ -253,7 +254,7 @@ def beam_area(system: System, heights_mm: FloatArray, *, scan: int = SCAN_SAMPLE
     if missed.size and scan < 32 * SCAN_SAMPLES:
         # A beam narrower than the scan step (a tiny stop, or the last sliver of a vignetted
         # field): look again, 16 times finer, at those heights only.
-        area[missed] = beam_area(system, h[missed], scan=16 * scan, rows=rows, steps=steps)
+        area[missed] = _rescan(system, h[missed], 16 * scan, rows, steps)
     live = np.flatnonzero(through.any(axis=1))
     if live.size == 0:
         return area.reshape(heights.shape)
@@ -303,6 +304,27 @@ def beam_area(system: System, heights_mm: FloatArray, *, scan: int = SCAN_SAMPLE
     half = half.reshape(row_ky.shape)
     area[live] = (math.pi / rows) * np.sum(2.0 * half * radius * np.sin(t)[None, :], axis=1)
     return area.reshape(heights.shape)
+
+
+def _rescan(system: System, h: FloatArray, scan: int, rows: int, steps: int) -> FloatArray:
+    """
+    Return :func:`beam_area` at ``scan`` samples of heights that a coarser scan missed.
+
+    Most of them are missed again (beyond a fisheye's image circle no ray passes), so which
+    ones have a passing ray at all is found first by :func:`trace_passes` (the same rays, the
+    failed ones dropped element by element: the same answer, several times faster); only those
+    are scanned with their margins, the others looked at finer still (or 0).
+    """
+    ky = -1.0 + (np.arange(scan) + 0.5) * (2.0 / scan)
+    kx = np.zeros(1)
+    hit = trace_passes(system, 0.0, h[:, None], 0.0, kx, ky[None, :],
+                       direction_from_cosines(kx, ky[None, :])).any(axis=1)
+    area = np.zeros(h.size)
+    if not hit.all() and scan < 32 * SCAN_SAMPLES:
+        area[~hit] = _rescan(system, h[~hit], 16 * scan, rows, steps)
+    if hit.any():
+        area[hit] = beam_area(system, h[hit], scan=scan, rows=rows, steps=steps)
+    return area
 
 
 def relative_illumination(model: Any, *, samples: int = RI_SAMPLES,
