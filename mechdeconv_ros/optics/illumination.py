@@ -87,6 +87,9 @@ EDGE_TOLERANCE = 1e-6
 ROOT_MARGIN = 1e-13
 #: Multiples of the meridional half-width probed to bracket each row's half-width.
 PROBE_FACTORS = (0.8, 1.0, 1.25, 1.6, 2.5, 4.0, 8.0)
+#: Systems with at least this many elements (surfaces and stop plane) find the heights a
+#: fine rescan has a beam at by :func:`trace_passes` first (see :func:`_rescan`).
+RESCAN_PASSES_ELEMENTS = 5
 
 
 @dataclass(frozen=True)
@@ -313,8 +316,12 @@ def _rescan(system: System, h: FloatArray, scan: int, rows: int, steps: int) -> 
     Most of them are missed again (beyond a fisheye's image circle no ray passes), so which
     ones have a passing ray at all is found first by :func:`trace_passes` (the same rays, the
     failed ones dropped element by element: the same answer, several times faster); only those
-    are scanned with their margins, the others looked at finer still (or 0).
+    are scanned with their margins, the others looked at finer still (or 0). A short system
+    (a thick lens: its rays fail at the stop, the last element) gains nothing from dropping
+    rays and would trace the heights with a beam twice: it is scanned directly.
     """
+    if len(system.elements) < RESCAN_PASSES_ELEMENTS:
+        return beam_area(system, h, scan=scan, rows=rows, steps=steps)
     ky = -1.0 + (np.arange(scan) + 0.5) * (2.0 / scan)
     kx = np.zeros(1)
     hit = trace_passes(system, 0.0, h[:, None], 0.0, kx, ky[None, :],

@@ -218,21 +218,42 @@ def _trace(system: System, x: np.ndarray, y: np.ndarray, z: np.ndarray,
            kx: np.ndarray, ky: np.ndarray, kz: np.ndarray
            ) -> tuple[np.ndarray, tuple[np.ndarray, ...]]:
     """Return the margins (:func:`trace_margin`) and the rays after the last element."""
-    rays = np.broadcast_arrays(*(np.asarray(a, dtype=float) for a in (x, y, z, kx, ky, kz)))
-    bad = ~(rays[5] > 0)
+    x, y, z, kx, ky, kz = np.broadcast_arrays(*(np.asarray(a, dtype=float)
+                                                for a in (x, y, z, kx, ky, kz)))
+    bad = ~(kz > 0)
     margin = np.ones(bad.shape)
     first = True
     last = max((i for i, e in enumerate(system.elements) if e.surface is not None), default=-1)
     with np.errstate(**_ERRSTATE):
-        for i, element in enumerate(system.elements):
-            rays = _advance(system, i, first and element.surface is not None, last, rays,
-                            margin, bad)
-            first = first and element.surface is None
+        for i, e in enumerate(system.elements):
+            z_local = z - e.z_mm
+            if e.surface is None:
+                # A stop plane: where the ray's line crosses it, without moving the ray (an
+                # iris close to a curved face may be crossed before or after it).
+                s = -z_local / kz
+                bad |= ~np.isfinite(s)
+                if e.clear_radius_mm > 0:
+                    r = np.hypot(x + s * kx, y + s * ky)
+                    np.fmin(margin, 1.0 - r / e.clear_radius_mm, out=margin)
+                continue
+            s, nx, ny, nz, failed = intersect(e.surface, x, y, z_local, kx, ky, kz)
+            bad |= failed
+            if not first:
+                bad |= s < -BACKWARD_TOLERANCE_MM
+            first = False
+            x = x + s * kx
+            y = y + s * ky
+            z = z + s * kz
+            if e.clear_radius_mm > 0:
+                np.fmin(margin, 1.0 - np.hypot(x, y) / e.clear_radius_mm, out=margin)
+            if e.n_before != e.n_after:
+                kx, ky, kz = refract(kx, ky, kz, nx, ny, nz, e.n_before, e.n_after)
+                bad |= ~np.isfinite(kz) if (system.free_exit and i == last) else ~(kz > 0)
     np.maximum(margin, -1.0, out=margin)
     # A ray that an aperture had clipped before it failed otherwise keeps that (continuous)
     # margin; only a ray whose hard failure is the limit gets FAILED.
     margin[np.isnan(margin) | (bad & (margin >= 0.0))] = FAILED
-    return margin, tuple(rays)
+    return margin, (x, y, z, kx, ky, kz)
 
 
 def _advance(system: System, i: int, first: bool, last: int, rays: tuple[np.ndarray, ...],
