@@ -87,9 +87,6 @@ EDGE_TOLERANCE = 1e-6
 ROOT_MARGIN = 1e-13
 #: Multiples of the meridional half-width probed to bracket each row's half-width.
 PROBE_FACTORS = (0.8, 1.0, 1.25, 1.6, 2.5, 4.0, 8.0)
-#: Systems with at least this many elements (surfaces and stop plane) find the heights a
-#: fine rescan has a beam at by :func:`trace_passes` first (see :func:`_rescan`).
-RESCAN_PASSES_ELEMENTS = 5
 
 
 @dataclass(frozen=True)
@@ -251,30 +248,33 @@ def beam_area(system: System, heights_mm: FloatArray, *, scan: int = SCAN_SAMPLE
     h = heights.ravel()
     area = np.zeros(h.size)
     ky = -1.0 + (np.arange(scan) + 0.5) * (2.0 / scan)
-    scanned = _margin(system, h[:, None], np.zeros(1), ky[None, :])
-    through = scanned >= 0.0
+    # Which directions pass (trace_passes drops each ray as it fails: the scans beyond a
+    # fisheye's image circle fail early); the margins, which the rim search needs, only at the
+    # first and last passing sample of each height and their failing neighbours (below).
+    kx = np.zeros(1)
+    through = trace_passes(system, 0.0, h[:, None], 0.0, kx, ky[None, :],
+                           direction_from_cosines(kx, ky[None, :]))
     missed = np.flatnonzero(~through.any(axis=1))
     if missed.size and scan < 32 * SCAN_SAMPLES:
         # A beam narrower than the scan step (a tiny stop, or the last sliver of a vignetted
         # field): look again, 16 times finer, at those heights only.
-        area[missed] = _rescan(system, h[missed], 16 * scan, rows, steps)
+        area[missed] = beam_area(system, h[missed], scan=16 * scan, rows=rows, steps=steps)
     live = np.flatnonzero(through.any(axis=1))
     if live.size == 0:
         return area.reshape(heights.shape)
     through = through[live]
-    scanned = scanned[live]
     hl = h[live]
     n = hl.size
     lo = np.argmax(through, axis=1)
     hi = scan - 1 - np.argmax(through[:, ::-1], axis=1)
-    rows_n = np.arange(n)
     below, above = np.maximum(lo - 1, 0), np.minimum(hi + 1, scan - 1)
+    scanned = _margin(system, hl[:, None], kx, ky[np.stack((lo, hi, below, above), axis=1)])
     good = np.concatenate((ky[lo], ky[hi]))
-    f_good = np.concatenate((scanned[rows_n, lo], scanned[rows_n, hi]))
+    f_good = np.concatenate((scanned[:, 0], scanned[:, 1]))
     bad = np.concatenate((np.where(lo > 0, ky[below], -1.0), np.where(hi < scan - 1,
                                                                       ky[above], 1.0)))
-    f_bad = np.concatenate((np.where(lo > 0, scanned[rows_n, below], FAILED),
-                            np.where(hi < scan - 1, scanned[rows_n, above], FAILED)))
+    f_bad = np.concatenate((np.where(lo > 0, scanned[:, 2], FAILED),
+                            np.where(hi < scan - 1, scanned[:, 3], FAILED)))
     edges = _edge(system, np.concatenate((hl, hl)), np.zeros(2 * n), good, f_good, bad, f_bad,
                   False, steps)
     k_lo, k_hi = edges[:n], edges[n:]
@@ -307,31 +307,6 @@ def beam_area(system: System, heights_mm: FloatArray, *, scan: int = SCAN_SAMPLE
     half = half.reshape(row_ky.shape)
     area[live] = (math.pi / rows) * np.sum(2.0 * half * radius * np.sin(t)[None, :], axis=1)
     return area.reshape(heights.shape)
-
-
-def _rescan(system: System, h: FloatArray, scan: int, rows: int, steps: int) -> FloatArray:
-    """
-    Return :func:`beam_area` at ``scan`` samples of heights that a coarser scan missed.
-
-    Most of them are missed again (beyond a fisheye's image circle no ray passes), so which
-    ones have a passing ray at all is found first by :func:`trace_passes` (the same rays, the
-    failed ones dropped element by element: the same answer, several times faster); only those
-    are scanned with their margins, the others looked at finer still (or 0). A short system
-    (a thick lens: its rays fail at the stop, the last element) gains nothing from dropping
-    rays and would trace the heights with a beam twice: it is scanned directly.
-    """
-    if len(system.elements) < RESCAN_PASSES_ELEMENTS:
-        return beam_area(system, h, scan=scan, rows=rows, steps=steps)
-    ky = -1.0 + (np.arange(scan) + 0.5) * (2.0 / scan)
-    kx = np.zeros(1)
-    hit = trace_passes(system, 0.0, h[:, None], 0.0, kx, ky[None, :],
-                       direction_from_cosines(kx, ky[None, :])).any(axis=1)
-    area = np.zeros(h.size)
-    if not hit.all() and scan < 32 * SCAN_SAMPLES:
-        area[~hit] = _rescan(system, h[~hit], 16 * scan, rows, steps)
-    if hit.any():
-        area[hit] = beam_area(system, h[hit], scan=scan, rows=rows, steps=steps)
-    return area
 
 
 def relative_illumination(model: Any, *, samples: int = RI_SAMPLES,
