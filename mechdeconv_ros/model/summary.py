@@ -30,6 +30,7 @@ from mechdeconv_ros.lenses.lens_source import LensSource
 from mechdeconv_ros.model import assembly
 from mechdeconv_ros.model.radial_map import COARSE_SAMPLES, field_cap_rad, trace_angles
 from mechdeconv_ros.optics import scene_constraints
+from mechdeconv_ros.optics.raytrace import MAX_CONTINUATION_STEP_RAD
 from mechdeconv_ros.optics.thick_lens import propagate_sigma
 import numpy as np
 
@@ -345,8 +346,12 @@ def _corner_sigma_px(model: Any, nominal: Mapping[str, float], sigmas: Mapping[s
     if not math.isfinite(theta):
         return math.nan
     # A ladder of angles up to the corner: a wide-angle lens's chief ray is aimed by
-    # continuation from the smaller angles (raytrace._aim_continued).
-    ladder = theta * np.array([0.25, 0.5, 0.75, 1.0])
+    # continuation from the smaller angles (raytrace._aim_continued), in steps of at most
+    # MAX_CONTINUATION_STEP_RAD. The ladder has those steps itself, so that the nominal
+    # offsets guide every step of every perturbed lens (one or two Newton steps each); a
+    # sparse ladder left the steps between its rungs unguided (about 50 traces per lens).
+    steps = max(4, math.ceil(abs(theta) / (0.99 * MAX_CONTINUATION_STEP_RAD)))
+    ladder = theta * np.arange(1, steps + 1) / steps
     source: LensSource = model.source
     # Each perturbed lens starts its aiming from the nominal lens's offsets at the same angles
     # (a perturbation of 1e-3 sigma moves them by far less than an aiming step): one or two

@@ -58,7 +58,8 @@ from typing import Any, Mapping
 
 from mechdeconv_ros.optics.prescription import image_plane, paraxial, Prescription
 from mechdeconv_ros.optics.trace3d import (
-    direction_from_cosines, FAILED, lens_system, reversed_system, System, trace_margin, trace_pass)
+    direction_from_cosines, FAILED, lens_system, reversed_system, System, trace_margin, trace_pass,
+    trace_passes)
 import numpy as np
 import numpy.typing as npt
 
@@ -247,8 +248,12 @@ def beam_area(system: System, heights_mm: FloatArray, *, scan: int = SCAN_SAMPLE
     h = heights.ravel()
     area = np.zeros(h.size)
     ky = -1.0 + (np.arange(scan) + 0.5) * (2.0 / scan)
-    scanned = _margin(system, h[:, None], np.zeros(1), ky[None, :])
-    through = scanned >= 0.0
+    # Which directions pass (trace_passes drops each ray as it fails: the scans beyond a
+    # fisheye's image circle fail early); the margins, which the rim search needs, only at the
+    # first and last passing sample of each height and their failing neighbours (below).
+    kx = np.zeros(1)
+    through = trace_passes(system, 0.0, h[:, None], 0.0, kx, ky[None, :],
+                           direction_from_cosines(kx, ky[None, :]))
     missed = np.flatnonzero(~through.any(axis=1))
     if missed.size and scan < 32 * SCAN_SAMPLES:
         # A beam narrower than the scan step (a tiny stop, or the last sliver of a vignetted
@@ -258,19 +263,18 @@ def beam_area(system: System, heights_mm: FloatArray, *, scan: int = SCAN_SAMPLE
     if live.size == 0:
         return area.reshape(heights.shape)
     through = through[live]
-    scanned = scanned[live]
     hl = h[live]
     n = hl.size
     lo = np.argmax(through, axis=1)
     hi = scan - 1 - np.argmax(through[:, ::-1], axis=1)
-    rows_n = np.arange(n)
     below, above = np.maximum(lo - 1, 0), np.minimum(hi + 1, scan - 1)
+    scanned = _margin(system, hl[:, None], kx, ky[np.stack((lo, hi, below, above), axis=1)])
     good = np.concatenate((ky[lo], ky[hi]))
-    f_good = np.concatenate((scanned[rows_n, lo], scanned[rows_n, hi]))
+    f_good = np.concatenate((scanned[:, 0], scanned[:, 1]))
     bad = np.concatenate((np.where(lo > 0, ky[below], -1.0), np.where(hi < scan - 1,
                                                                       ky[above], 1.0)))
-    f_bad = np.concatenate((np.where(lo > 0, scanned[rows_n, below], FAILED),
-                            np.where(hi < scan - 1, scanned[rows_n, above], FAILED)))
+    f_bad = np.concatenate((np.where(lo > 0, scanned[:, 2], FAILED),
+                            np.where(hi < scan - 1, scanned[:, 3], FAILED)))
     edges = _edge(system, np.concatenate((hl, hl)), np.zeros(2 * n), good, f_good, bad, f_bad,
                   False, steps)
     k_lo, k_hi = edges[:n], edges[n:]

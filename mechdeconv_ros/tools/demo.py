@@ -51,8 +51,8 @@ from typing import Any, Sequence
 from mechdeconv_ros.node import process_env
 from mechdeconv_ros.node.process_env import Child
 from mechdeconv_ros.tools.demo_report import (
-    DemoError, diagnostics_lines, lens_change, measure, newest_rect, say, stamp_ns, stop_children,
-    summary_image, to_bgr, wait_for, write_png)
+    DemoError, diagnostics_lines, in_background, lens_change, measure, newest_rect, say, stamp_ns,
+    stop_children, summary_image, to_bgr, wait_for, write_png)
 from mechdeconv_ros.tools.demo_sweep import sweep_scenario
 
 #: Seconds to wait for the first corrected frame after starting the processes.
@@ -129,8 +129,9 @@ def run(args: argparse.Namespace, children: list[Child]) -> int:
     moving = getattr(before.source, 'moving', ())
     if moving:
         # Issue 19: the lens moves by itself; the story is the sweep, not a parameter set.
-        change, after, change_text = {}, before, ''
+        change, after, change_text, report = {}, before, '', None
     else:
+        report = in_background(before.report)   # seconds of tracing, beside the children's start
         change, after, change_text = lens_change(values, width, height, args.stop_offset,
                                                  args.thickness)
 
@@ -168,7 +169,7 @@ def run(args: argparse.Namespace, children: list[Child]) -> int:
         if moving:
             return sweep_scenario(args, children, monitor, before, params_file, out)
         return scenario(args, children, monitor, (before, after, change, change_text),
-                        params_file, out)
+                        params_file, out, report)
     finally:
         executor.shutdown(timeout_sec=2.0)
         monitor.destroy_node()
@@ -177,7 +178,8 @@ def run(args: argparse.Namespace, children: list[Child]) -> int:
 
 
 def scenario(args: argparse.Namespace, children: list[Child], monitor: Any,
-             lens: tuple[Any, Any, dict[str, Any], str], params_file: Path, out: Path) -> int:
+             lens: tuple[Any, Any, dict[str, Any], str], params_file: Path, out: Path,
+             report: Any) -> int:
     """Tell the story: the lens, the correction, the lens change, its reaction; 0 on success."""
     from mechdeconv_ros.tools.cli import format_report
     before, after, change, change_text = lens
@@ -187,7 +189,7 @@ def scenario(args: argparse.Namespace, children: list[Child], monitor: Any,
              'corrected frame on image_rect', children)
     say('first corrected frame received')
     print(f'\nmodel ({params_file.name}, {before.width}x{before.height}, as the node builds '
-          'it):\n  ' + format_report(before.report()).replace('\n', '\n  '), flush=True)
+          'it):\n  ' + format_report(report()).replace('\n', '\n  '), flush=True)
     wait_for(lambda: bool(monitor.diag.get('model_revision')), 5.0, 'diagnostics from the node',
              children)
     print(diagnostics_lines(monitor.diag, monitor.diag_message), flush=True)

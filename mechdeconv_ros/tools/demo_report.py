@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+import threading
 import time
 from typing import Any, Callable, Mapping, Sequence
 
@@ -28,6 +29,37 @@ DIAGNOSTIC_KEYS = ('model_revision', 'last_rebuild_ms', 'focal_length_mm', 'dist
 
 class DemoError(Exception):
     """Something went wrong that the demo reports in one line (exit status 1)."""
+
+
+def in_background(fn: Callable[[], Any]) -> Callable[[], Any]:
+    """
+    Start ``fn()`` in a daemon thread; return a function that waits for it and returns its result.
+
+    The demo's printed lens report traces for seconds (a fisheye's relative illumination, the
+    tolerance sigmas): started before the children, it runs while they start up (their own
+    processes) instead of after the first frame. The waiting function raises what ``fn``
+    raised.
+
+    :param fn: the work.
+    :return: the waiting function.
+    """
+    outcome: dict[str, Any] = {}
+
+    def work() -> None:
+        try:
+            outcome['result'] = fn()
+        except BaseException as err:     # handed to the waiting thread, not printed here
+            outcome['error'] = err
+
+    thread = threading.Thread(target=work, name='demo-report', daemon=True)
+    thread.start()
+
+    def wait() -> Any:
+        thread.join()
+        if 'error' in outcome:
+            raise outcome['error']
+        return outcome['result']
+    return wait
 
 
 def say(text: str) -> None:
