@@ -86,6 +86,25 @@ def test_3d_trace_matches_the_meridional_trace():
     assert not np.any(ok & ~free)
 
 
+@pytest.mark.parametrize('name,skew', [('cooke_triplet.yaml', 0.3), ('fisheye.yaml', 0.0)])
+def test_trace_passes_is_the_margins_sign(name, skew):
+    # trace_passes drops failed rays element by element (the beam scans); it must say
+    # exactly what trace_margin >= 0 says. Rays as beam_area scans them (heights x
+    # directions over the front element; skew ones too through the triplet: the fisheye's
+    # small stop passes almost no random skew ray), most failing somewhere.
+    lens = build_model(load_params_file(CONFIG / name)).prescription
+    system = trace3d.lens_system(lens, 0.0, None)
+    radius = system.elements[0].clear_radius_mm
+    x = np.linspace(-0.5, 0.5, 3)[:, None, None] * radius
+    y = np.linspace(-radius, radius, 120)[None, :, None]
+    ky = np.linspace(-0.99, 0.99, 200)[None, None, :]
+    kx = np.full(ky.shape, skew)
+    kz = trace3d.direction_from_cosines(kx, ky)
+    expected = trace3d.trace_margin(system, x, y, 0.0, kx, ky, kz) >= 0.0
+    assert expected.shape == (3, 120, 200) and 300 < expected.sum() < expected.size / 2
+    np.testing.assert_array_equal(trace3d.trace_passes(system, x, y, 0.0, kx, ky, kz), expected)
+
+
 @pytest.mark.parametrize('aspheric', [False, True], ids=['spherical', 'aspheric'])
 def test_reversed_trace_retraces_a_skew_ray(aspheric):
     values = load_params_file(CONFIG / 'cooke_triplet.yaml')

@@ -225,6 +225,8 @@ def _trace(system: System, x: np.ndarray, y: np.ndarray, z: np.ndarray,
     first = True
     last = max((i for i, e in enumerate(system.elements) if e.surface is not None), default=-1)
     with np.errstate(**_ERRSTATE):
+        # The element step of _advance, inline: calling it here measured 8-20 % slower on the
+        # aiming's many small traces (a change to one must be made to both).
         for i, e in enumerate(system.elements):
             z_local = z - e.z_mm
             if e.surface is None:
