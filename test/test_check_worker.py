@@ -97,11 +97,19 @@ def test_the_child_is_nice_ignores_sigint_and_its_death_is_reported(
     assert worker.check(blank, model, model, 1, 0.3)['result'].verdict == 'not_enough_edges'
 
 
-def test_no_orphan_when_the_parent_is_killed() -> None:
+@pytest.mark.parametrize('paused', [False, True], ids=['running', 'paused'])
+def test_no_orphan_when_the_parent_is_killed(paused: bool) -> None:
+    # Running: its socket's EOF ends it. Paused (SIGSTOP, the node's CPU gate): it cannot
+    # read, PR_SET_PDEATHSIG kills it.
     code = ('import sys, time\n'
             'from mechdeconv_ros.imaging.check_worker import CheckWorker\n'
-            'w = CheckWorker()\nw.start()\nprint(w.process.pid, flush=True)\ntime.sleep(60)\n')
-    parent = subprocess.Popen([sys.executable, '-c', code], stdout=subprocess.PIPE, cwd=REPO)
+            'w = CheckWorker()\nw.start()\nif len(sys.argv) > 1:\n'
+            # Paused once it serves (its nice 19 is set after the death signal), as in a check.
+            '    import psutil\n    child = psutil.Process(w.process.pid)\n'
+            '    while child.nice() != 19:\n        time.sleep(0.05)\n    w.pause(True)\n'
+            'print(w.process.pid, flush=True)\ntime.sleep(60)\n')
+    parent = subprocess.Popen([sys.executable, '-c', code, *(['paused'] if paused else [])],
+                              stdout=subprocess.PIPE, cwd=REPO)
     try:
         child = psutil.Process(int(parent.stdout.readline()))
         parent.kill()

@@ -16,7 +16,9 @@ inherits no ROS state, only the socket), which:
   OpenCV on one thread, runs in a session of its own and ignores SIGINT (a node is stopped by
   SIGINT to its process group and must exit 0; its parent stops the child);
 * exits when its end of the socket pair closes (the parent stopped, or died, even by
-  SIGKILL: the kernel closes the parent's end), after the check it is in, if any.
+  SIGKILL: the kernel closes the parent's end), after the check it is in, if any; while
+  paused (SIGSTOP: the node's CPU gate, :mod:`~mechdeconv_ros.imaging.check_gate`) it cannot
+  read, so it also asks Linux to SIGKILL it when its parent dies (PR_SET_PDEATHSIG).
 
 Protocol, over a :class:`multiprocessing.connection.Connection` on a Unix socket pair, one
 request and one reply at a time:
@@ -38,6 +40,7 @@ from __future__ import annotations
 
 from collections import deque
 import copy
+import ctypes
 import dataclasses
 import os
 from pathlib import Path
@@ -53,6 +56,8 @@ from mechdeconv_ros.imaging.plumb_check import chains_from_corrected, check_chai
 from mechdeconv_ros.imaging.remap import build_float_maps
 import numpy as np
 
+#: Linux prctl option: the signal a child gets when its parent (thread) dies.
+PR_SET_PDEATHSIG = 1
 #: Seconds the parent waits for the child to exit after SIGTERM before SIGKILL.
 STOP_WAIT_S = 2.0
 #: The CPU priority (nice) of the child.
@@ -181,7 +186,7 @@ class CheckWorker:
             # `site`, before BOOTSTRAP can ignore SIGINT (a "Fatal Python error" traceback in
             # the node's log). The parent stops it; its socket's EOF ends it if the parent dies.
             self.process = subprocess.Popen(
-                [sys.executable, '-c', BOOTSTRAP, str(child.fileno())],
+                [sys.executable, '-c', BOOTSTRAP, str(child.fileno()), str(os.getpid())],
                 pass_fds=(child.fileno(),), env=env, stdin=subprocess.DEVNULL,
                 start_new_session=True)
         finally:
@@ -281,12 +286,24 @@ def main(argv: list[str] | None = None) -> int:
     """
     Run the child: nice 19, SCHED_IDLE, SIGINT ignored; serve the socket until it closes.
 
-    :param argv: ``[FD]``, the child's end of the socket pair; default ``sys.argv[1:]``.
+    :param argv: ``[FD, PARENT_PID]``: the child's end of the socket pair and the pid of the
+        process that started it; default ``sys.argv[1:]``.
     :return: the exit status.
     """
     from multiprocessing.connection import Connection
     args = sys.argv[1:] if argv is None else argv
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # A paused child (SIGSTOP, the node's CPU gate) cannot see its socket close: if the node
+    # dies then, Linux kills it (PR_SET_PDEATHSIG, SIGKILL: it acts on a stopped process). It
+    # fires when the parent's THREAD that started it ends: the node's check thread, which
+    # lives as long as the node.
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    except (OSError, AttributeError):
+        pass
+    if len(args) > 1 and os.getppid() != int(args[1]):
+        return 0        # the parent died before the request above
+
     try:
         os.setpriority(os.PRIO_PROCESS, 0, NICE)
     except (AttributeError, OSError):

@@ -9,9 +9,10 @@ such as the check's own not counted: :mod:`~mechdeconv_ros.imaging.check_gate`) 
 ``check.max_load``, the frame callback hands over a COPY of a corrected frame with the model
 that made it (:meth:`CheckThread.offer`: a dict swap and one ``np.copy``). A check in progress
 when the load rises above ``check.max_load`` is paused (SIGSTOP to its process) until the load
-is below 0.8 of it: an idle-priority process still shares the memory bus and the cache, and
-on a node paced at its serial bound it cost 4-5 % of the frames (``check_deferred``,
-``check_pauses`` and ``check_cpu_load`` in ``/diagnostics`` show what the gate did).
+is below 0.8 of it: an idle-priority process still shares the memory bus and the cache (in
+two runs a node paced at its serial bound delivered 4-5 % fewer frames with the check on).
+``check_deferred``, ``check_pauses`` and ``check_cpu_load`` in ``/diagnostics`` show what the
+gate did.
 
 The thread (nice 19 on Linux) sends the frame to the check's child process
 (:mod:`~mechdeconv_ros.imaging.check_worker`: nice 19, no ROS in it; started with the
@@ -53,7 +54,7 @@ from rclpy.parameter import Parameter
 
 #: Seconds the thread waits for a frame before it looks at its stop flag again.
 WAIT_S = 0.5
-#: Seconds between two looks at the frame path's load while a check runs (pause / continue).
+#: Seconds between two looks at the machine's load while a check runs (pause / continue).
 LOAD_POLL_S = 0.05
 #: Restarts of a check process that died before the check stays off.
 MAX_RESTARTS = 3
