@@ -31,7 +31,7 @@ setup(
     extras_require={'test': ['pytest']},
     entry_points={
         'console_scripts': [
-            'correct_node = mechdeconv_ros.node.correct_node:main',
+            'correct_node = mechdeconv_ros.node.entry:correct_node',
             'mechdeconv = mechdeconv_ros.tools.cli:main',
             'demo_camera = mechdeconv_ros.tools.demo_camera:main',
         ],

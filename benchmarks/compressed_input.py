@@ -124,7 +124,7 @@ def measure(width: int, height: int, transport: str, seconds: float, log_dir: Pa
     """Run node + publisher for one size and transport; return the window's figures."""
     domain = pick_domain_id('benchmarks', salt)
     env = graph_env(domain, shm_profile=True)
-    node_cmd = [sys.executable, '-m', 'mechdeconv_ros.node.correct_node', '--ros-args',
+    node_cmd = [sys.executable, '-m', 'mechdeconv_ros.node.entry', '--ros-args',
                 '--params-file', str(CASE2_YAML), '-p', 'sensor.width_px:=0',
                 '-p', 'sensor.height_px:=0', '-p', f'image_transport:={transport}']
     pub_cmd = [sys.executable, '-m', 'benchmarks.compressed_input', '--role', 'publisher',

@@ -341,7 +341,7 @@ def _node_argv(kind: str, params: Path) -> list[str]:
     if kind in ('node', 'still'):
         # 'still': the same lens with its zoom joint off (the first rows, no lens_state).
         still = ['-p', 'lens.zoom.joint:=""'] if kind == 'still' else []
-        return [sys.executable, '-m', 'mechdeconv_ros.node.correct_node', '--ros-args',
+        return [sys.executable, '-m', 'mechdeconv_ros.node.entry', '--ros-args',
                 '--params-file', str(params)] + still
     return [sys.executable, '-m', 'benchmarks.passthrough_node']
 

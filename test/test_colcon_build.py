@@ -20,6 +20,7 @@ import signal
 import subprocess
 import sys
 import sysconfig
+import time
 import zipfile
 
 from mechdeconv_ros.node.image_msgs import image_to_array
@@ -153,6 +154,41 @@ def test_installed_node_corrects_a_frame_and_exits_cleanly(
         log = proc.output()
     assert code == 0, log[-3000:]
     assert 'Traceback' not in log, log[-3000:]
+
+
+def loaded(pid: int, library: str) -> bool:
+    """Return whether a running process has mapped a shared library whose path has ``library``."""
+    try:
+        return library in Path(f'/proc/{pid}/maps').read_text()
+    except OSError:
+        return False
+
+
+def test_installed_node_stopped_while_it_imports_exits_0_without_a_traceback(
+        install: Path, tmp_path: Path) -> None:
+    """
+    Ctrl-C (or ``ros2 launch`` stopping it) in the node's first second, while it imports.
+
+    The signal is sent once numpy's compiled core is mapped: the entry point has installed its
+    handlers by then, and rclpy and most of the node's modules are still to come (about 0.5 s).
+    Before the entry point caught signals first, this ended with a KeyboardInterrupt traceback
+    and exit code -2.
+    """
+    executable = install / PACKAGE / 'lib' / PACKAGE / 'correct_node'
+    params = install / PACKAGE / 'share' / PACKAGE / 'config' / 'case2.yaml'
+    env = installed_env(install, next_domain_id())
+    argv = node_command(params, executable=[str(executable)])
+    with NodeProcess(argv, env, tmp_path) as proc:
+        deadline = time.monotonic() + 30.0
+        while not loaded(proc.pid, '_multiarray_umath') and time.monotonic() < deadline:
+            time.sleep(0.002)
+        assert not loaded(proc.pid, '_rclpy_pybind11'), \
+            'the node had imported rclpy before the signal: the test proves nothing'
+        code = proc.stop(signal.SIGINT)
+        log = proc.output()
+    assert code == 0, log[-3000:]
+    assert 'Traceback' not in log and 'KeyboardInterrupt' not in log, log[-3000:]
+    assert 'ready:' not in log, log[-3000:]      # it stopped instead of starting
 
 
 def test_the_pip_wheel_ships_the_layers_and_the_package_data(tmp_path: Path) -> None:

@@ -80,7 +80,8 @@ def prefix(tmp_path_factory: pytest.TempPathFactory) -> Path:
     lib.mkdir(parents=True)
     executable = lib / 'correct_node'
     executable.write_text(f'#!{sys.executable}\nimport sys\n'
-                          'from mechdeconv_ros.node.correct_node import main\nsys.exit(main())\n')
+                          'from mechdeconv_ros.node.entry import correct_node\n'
+                          'sys.exit(correct_node())\n')
     executable.chmod(0o755)
     return root
 

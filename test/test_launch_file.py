@@ -76,7 +76,7 @@ def check_launch_file(text: str) -> None:
     assert len(nodes) == 1
     node = nodes[0]
     assert ast.literal_eval(_kw(node, 'executable')) == 'correct_node'
-    assert 'correct_node = mechdeconv_ros.node.correct_node:main' in (
+    assert 'correct_node = mechdeconv_ros.node.entry:correct_node' in (
         REPO / 'setup.py').read_text()
     assert ast.literal_eval(_kw(node, 'name')) == 'correct_node'
     assert _config_name(_kw(node, 'namespace')) == 'namespace'

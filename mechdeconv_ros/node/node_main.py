@@ -4,14 +4,14 @@
 Run one node until SIGINT/SIGTERM and exit 0; exit 1 on invalid start-up parameters.
 
 SIGINT and SIGTERM only set a flag that the spin loop checks between callbacks (at least every
-:data:`STOP_POLL_S`): rclpy's own handler raises KeyboardInterrupt wherever the interpreter
+:data:`STOP_POLL_S`; :mod:`~mechdeconv_ros.node.stop_signals` says why, and how a second and a
+third signal are taken): rclpy's own handler raises KeyboardInterrupt wherever the interpreter
 is, and while a received image is converted to Python rclpy turns that into a RuntimeError,
-so Ctrl-C (or ``ros2 launch`` stopping the node) ended with a traceback and exit code 1. A
-second SIGINT is ignored: Ctrl-C on ``ros2 launch`` reaches the node from the terminal and
-launch forwards one more (always with ``--noninteractive``), which used to interrupt the
-shutdown (exit code -2). Should shutdown hang, a third SIGINT, or a SIGTERM after the first
-signal (launch sends one after its timeout), stops the process the default way. The signal
-path touches nothing but the flag: the main thread then destroys the node.
+so Ctrl-C (or ``ros2 launch`` stopping the node) ended with a traceback and exit code 1. The
+console scripts install the same handlers before their imports
+(:mod:`~mechdeconv_ros.node.entry`); :func:`run_node` takes those over, so a stop requested
+before the node exists ends the process with exit code 0 without creating it. The signal path
+touches nothing but the flag: the main thread then destroys the node.
 
 The GIL switch interval is :data:`GIL_SWITCH_S` while the node runs (Python's default is
 5 ms). The node's background threads (model rebuild, summary, check) run pure-Python optics
@@ -23,12 +23,11 @@ looping beside a 1280x960 remap: frame p50 2.8 ms alone, 12.7 ms (p99 28.8) at 5
 
 from __future__ import annotations
 
-import signal
 import sys
-import threading
-from typing import Any, Callable
+from typing import Callable
 
 from mechdeconv_ros.node.process_env import keep_large_buffers
+from mechdeconv_ros.node.stop_signals import StopSignals, take_early
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
@@ -50,29 +49,22 @@ def run_node(factory: Callable[[], Node], name: str, args: list[str] | None = No
     :param args: command-line arguments for rclpy (``--ros-args ...``); default ``sys.argv``.
     """
     keep_large_buffers()
+    signals = take_early() or StopSignals().install()
+    stop = signals.event
+    if stop.is_set():           # stopped while Python imported the node: nothing to undo
+        signals.restore()
+        return
     switch_interval = sys.getswitchinterval()
     sys.setswitchinterval(GIL_SWITCH_S)
-    stop = threading.Event()
-
-    def request_stop(signum: int, frame: Any) -> None:
-        stop.set()
-        signal.signal(signal.SIGINT, ignore_once)
-        signal.signal(signal.SIGTERM, signal.SIG_DFL)
-
-    def ignore_once(signum: int, frame: Any) -> None:
-        signal.signal(signal.SIGINT, signal.default_int_handler)
-
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    previous = {}
-    if threading.current_thread() is threading.main_thread():
-        previous = {sig: signal.signal(sig, request_stop)
-                    for sig in (signal.SIGINT, signal.SIGTERM)}
     node: Node | None = None
     failed = False
     try:
-        node = factory()
+        if not stop.is_set():
+            node = factory()
         executor = SingleThreadedExecutor()
-        executor.add_node(node)
+        if node is not None:
+            executor.add_node(node)
         while not stop.is_set() and executor.context.ok():
             executor.spin_once(timeout_sec=STOP_POLL_S)
     except (KeyboardInterrupt, ExternalShutdownException):
@@ -84,8 +76,7 @@ def run_node(factory: Callable[[], Node], name: str, args: list[str] | None = No
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+        signals.restore()
         sys.setswitchinterval(switch_interval)
     if failed:
         sys.exit(1)

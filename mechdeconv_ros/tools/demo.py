@@ -137,7 +137,7 @@ def run(args: argparse.Namespace, children: list[Child]) -> int:
 
     say(f'ROS_DOMAIN_ID={domain}, ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, '
         f'FASTRTPS_DEFAULT_PROFILES_FILE={env.get(process_env.PROFILE_VAR)}')
-    modules = {'correct_node': 'mechdeconv_ros.node.correct_node',
+    modules = {'correct_node': 'mechdeconv_ros.node.entry',
                'demo_camera': 'mechdeconv_ros.tools.demo_camera'}
     commands = {
         'correct_node': ['--params-file', str(params_file),
@@ -171,10 +171,11 @@ def run(args: argparse.Namespace, children: list[Child]) -> int:
         return scenario(args, children, monitor, (before, after, change, change_text),
                         params_file, out, report)
     finally:
+        # The spin thread ends before the node it spins is destroyed.
         executor.shutdown(timeout_sec=2.0)
+        spinner.join(timeout=2.0)
         monitor.destroy_node()
         rclpy.try_shutdown()
-        spinner.join(timeout=2.0)
 
 
 def scenario(args: argparse.Namespace, children: list[Child], monitor: Any,

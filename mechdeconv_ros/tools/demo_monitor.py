@@ -24,6 +24,9 @@ from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, JointState
 
+#: How many times a lens change is requested before the demo gives up (see set_lens).
+SET_ATTEMPTS = 3
+
 
 class Monitor(Node):
     """Subscribes to the node's outputs and keeps what the demo prints and saves."""
@@ -159,7 +162,8 @@ class Monitor(Node):
         :param values: parameter name -> value (a float, or a list of floats: a DOUBLE_ARRAY).
         :param timeout_s: how long to wait for the service and for the reply.
         :return: (SetParametersResult, request monotonic s, reply monotonic s).
-        :raises DemoError: when the service is missing or does not answer.
+        :raises DemoError: when the service is missing or does not answer (after
+            :data:`SET_ATTEMPTS` requests).
         """
         client = self.param_clients[node]
         if not client.wait_for_service(timeout_sec=timeout_s):
@@ -169,12 +173,22 @@ class Monitor(Node):
             (Parameter(name, Parameter.Type.DOUBLE_ARRAY, [float(v) for v in value])
              if isinstance(value, (list, tuple)) else Parameter(name, value=float(value)))
             .to_parameter_msg() for name, value in values.items()]
-        replied: list[float] = []
+        # A reply lost on the way was seen once in a loaded test run (the camera had applied
+        # the lens, the reply never came): the same request is sent again, at most
+        # SET_ATTEMPTS times within timeout_s; setting the same values twice is harmless.
+        replied: list[tuple[float, Any]] = []
         sent = time.monotonic()
-        future = client.call_async(request)
-        future.add_done_callback(lambda _: replied.append(time.monotonic()))
-        wait_for(lambda: bool(replied), timeout_s, f'the reply of /{node}')
-        return future.result().result, sent, replied[0]
+        for attempt in range(SET_ATTEMPTS):
+            future = client.call_async(request)
+            future.add_done_callback(lambda done: replied.append((time.monotonic(), done)))
+            try:
+                wait_for(lambda: bool(replied), timeout_s / SET_ATTEMPTS, f'the reply of /{node}')
+                break
+            except DemoError:
+                if attempt == SET_ATTEMPTS - 1:
+                    raise
+        reply_time, done = replied[0]
+        return done.result().result, sent, reply_time
 
 
 def spin(executor: Any) -> None:
@@ -185,5 +199,5 @@ def spin(executor: Any) -> None:
     except (ExternalShutdownException, KeyboardInterrupt):
         pass
     except Exception as err:    # noqa: B902 - a context shut down under the executor
-        if 'shutdown' not in str(err).lower():
+        if not any(word in str(err).lower() for word in ('shutdown', 'destruction')):
             raise
