@@ -7,8 +7,8 @@ SIGINT and SIGTERM only set a flag that the spin loop checks between callbacks (
 :data:`STOP_POLL_S`; :mod:`~mechdeconv_ros.node.stop_signals` says why, and how a second and a
 third signal are taken): rclpy's own handler raises KeyboardInterrupt wherever the interpreter
 is, and while a received image is converted to Python rclpy turns that into a RuntimeError,
-so Ctrl-C (or ``ros2 launch`` stopping the node) ended with a traceback and exit code 1. The
-console scripts install the same handlers before their imports
+so Ctrl-C (or ``ros2 launch`` stopping the node) ended with a traceback and exit code 1.
+correct_node's console script installs the same handlers before its imports
 (:mod:`~mechdeconv_ros.node.entry`); :func:`run_node` takes those over, so a stop requested
 before the node exists ends the process with exit code 0 without creating it. The signal path
 touches nothing but the flag: the main thread then destroys the node.

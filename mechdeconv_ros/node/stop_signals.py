@@ -5,11 +5,11 @@ SIGINT and SIGTERM as a stop request, from the first line of a node process (std
 
 A node process spends its first 0.5 to 1 s importing rclpy, numpy and OpenCV. Under Python's
 own handler a Ctrl-C (or ``ros2 launch`` stopping the node) in that time raised
-KeyboardInterrupt inside some import: a traceback and exit code -2. The entry points
-(:mod:`mechdeconv_ros.node.entry`) therefore call :func:`catch_early` before importing
-anything heavy, and :func:`mechdeconv_ros.node.node_main.run_node` takes over the same
-:class:`StopSignals` (:func:`take_early`): a stop requested at any moment ends the process
-with exit code 0.
+KeyboardInterrupt inside some import: a traceback and exit code -2. correct_node's entry
+point (:mod:`mechdeconv_ros.node.entry`) therefore calls :func:`catch_early` before it
+imports anything heavy, and :func:`mechdeconv_ros.node.node_main.run_node` takes over the
+same :class:`StopSignals` (:func:`take_early`): a stop requested from then on (the
+interpreter's own start-up, tens of ms, comes before) ends the process with exit code 0.
 
 The handlers only set an Event (the main thread then stops and destroys the node). A second
 SIGINT is ignored: Ctrl-C on ``ros2 launch`` reaches the node from the terminal and launch
