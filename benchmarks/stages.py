@@ -55,7 +55,7 @@ from typing import Any, Mapping, Sequence
 
 from benchmarks.common import LoadMonitor, log, RESULTS
 from benchmarks.node_latency import (
-    latency_stats, node_argv, node_remap, Probe, publisher_argv, ros_env,
+    announcing_probe, latency_stats, node_argv, node_remap, Probe, publisher_argv, ros_env,
     start_child)
 from benchmarks.report import (
     fmt_ms, fmt_num, machine_info, machine_line, markdown_table, verdict, write_json)
@@ -324,8 +324,10 @@ def child_main(quick: bool, out_json: Path, baseline: str = '',
     doc: dict[str, Any] = {'bare_remap': {}, 'traffic': {}, 'runs': [], 'errors': []}
     log_dir = Path(tempfile.mkdtemp(prefix='mechdeconv_bench_stages_'))
     doc['log_dir'] = str(log_dir)
-    # Quick: the probe first (its first seconds pass during the bare remap).
-    early_probe = (Probe(int(env['ROS_DOMAIN_ID']), name='stage_probe') if quick else None)
+    # Quick: the probe first (its first seconds pass during the bare remap), announcing often
+    # (node_latency.announcing_probe: each rung's start-up waited 0-3 s for discovery).
+    early_probe = (announcing_probe(int(env['ROS_DOMAIN_ID']), log_dir, name='stage_probe')
+                   if quick else None)
     for width, height in sizes:
         doc['bare_remap'][f'{width}x{height}'] = bare_remap(width, height, 6 if quick else 90)
         doc['traffic'][f'{width}x{height}'] = frame_traffic(width, height, 3 if quick else 15)

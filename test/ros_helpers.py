@@ -28,6 +28,7 @@ import os
 from pathlib import Path
 import signal
 import sys
+import tempfile
 import time
 from typing import Any, Callable, Iterator, Sequence
 
@@ -78,16 +79,25 @@ def ros_env(domain_id: int, extra: dict[str, str] | None = None) -> dict[str, st
     return process_env.graph_env(domain_id, extra=extra)
 
 
+#: The test process's Fast DDS profile (configure_test_process), written once per process.
+_ANNOUNCING: Path | None = None
+
+
 def configure_test_process() -> None:
     """
     Set the ROS environment of the test process itself (before its first participant).
 
     Fast DDS reads its profile file once per process, at the first participant, so this must
-    run before any ``rclpy.init`` of the session. It is the package's profile, as the nodes
-    under test load: its participants announce themselves every 0.5 s, so a client made
-    before the node it tests discovers the node within about 0.5 s.
+    run before any ``rclpy.init`` of the session. The test process's participants announce
+    themselves every 0.5 s (:func:`~mechdeconv_ros.node.process_env.announcing_profile`):
+    a client made before the node it tests discovered the node only at its own announcements,
+    every 3 s by default. The nodes under test keep the package's profile.
     """
-    process_env.configure_this_process(process_env.graph_env(0))
+    global _ANNOUNCING
+    if _ANNOUNCING is None:
+        _ANNOUNCING = process_env.announcing_profile(Path(tempfile.mkdtemp(prefix='ros_test_')))
+    process_env.configure_this_process(
+        process_env.graph_env(0, extra={process_env.PROFILE_VAR: str(_ANNOUNCING)}))
 
 
 class NodeProcess(Child):

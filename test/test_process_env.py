@@ -174,19 +174,20 @@ def test_context_manager_kills_a_child_left_running(tmp_path):
     assert 'ready' in c.tail()
 
 
-def test_package_profile_carries_big_frames_and_announces_every_half_second() -> None:
+def test_announcing_profile_keeps_the_transports_and_announces_every_period(
+        tmp_path: Path) -> None:
+    path = process_env.announcing_profile(tmp_path, period_s=0.5)
+    assert path.parent == tmp_path and path != process_env.fastdds_profile()
     ns = {'f': 'http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles'}
-    root = ET.parse(process_env.fastdds_profile()).getroot()
-    participant = root.find('.//f:participant', ns)
-    assert participant.get('is_default_profile') == 'true'
-    rtps = participant.find('f:rtps', ns)
-    # Shared memory for the frames, UDPv4 for other hosts, no builtin transports.
-    shm = root.find('.//f:transport_descriptor[f:type="SHM"]', ns)
-    assert int(shm.find('f:segment_size', ns).text) == 128 * 2 ** 20
-    assert int(shm.find('f:maxMessageSize', ns).text) == 64 * 2 ** 20
-    assert [t.text for t in rtps.findall('f:userTransports/f:transport_id', ns)] == [
-        'mechdeconv_shm_big', 'mechdeconv_udpv4']
-    assert rtps.find('f:useBuiltinTransports', ns).text == 'false'
-    # A process already running discovers one started later within about 0.5 s, not 3 s.
+    ours, package = ET.parse(path).getroot(), ET.parse(process_env.fastdds_profile()).getroot()
+    rtps = ours.find('.//f:participant/f:rtps', ns)
     lease = rtps.find('f:builtin/f:discovery_config/f:leaseAnnouncement', ns)
     assert (lease.find('f:sec', ns).text, lease.find('f:nanosec', ns).text) == ('0', '500000000')
+    # Everything else is the package's: the same transports, segment and message sizes.
+    for tag in ('userTransports', 'useBuiltinTransports'):
+        assert ET.tostring(rtps.find(f'f:{tag}', ns)) == ET.tostring(
+            package.find(f'.//f:participant/f:rtps/f:{tag}', ns))
+    assert ET.tostring(ours.find('.//f:transport_descriptors', ns)) == ET.tostring(
+        package.find('.//f:transport_descriptors', ns))
+    # A profile that already sets builtin discovery is used as it is.
+    assert process_env.announcing_profile(tmp_path / 'x', source=path) == path
