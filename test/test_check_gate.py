@@ -75,3 +75,45 @@ def test_this_machine_reads() -> None:
         pytest.skip(f'{PROC_STAT} is Linux only')
     busy, total = read_counters()
     assert 0 <= busy <= total and total > 0
+
+
+def test_a_running_check_is_stopped_to_read_the_load_without_it(tmp_path: Path) -> None:
+    """A node the check slows uses less CPU: only a probe with the check stopped shows it."""
+    stat = tmp_path / 'stat'
+    _stat(stat, user=0, nice=0, system=0, idle=0)
+    gate = LoadGate(str(stat), period_s=0.5)
+    # Running: the frames take 60 of 100 ticks, the check the other 40 (niced): load 0.6.
+    ticks = {'user': 0, 'nice': 0, 'system': 0, 'idle': 0}
+
+    def advance(now: float, **add: int) -> float:
+        for key, value in add.items():
+            ticks[key] += value
+        _stat(stat, **ticks)
+        return gate.sample(now)
+
+    for k, now in enumerate((0.5, 1.0, 1.5, 2.0)):
+        assert advance(now, user=60, nice=40) == pytest.approx(0.6)
+        assert not gate.should_pause(0.75, paused=False, now=now), k
+    assert gate.probes == 0 and gate.busy_pauses == 0
+    # 2 s of running: a probe stops it, whatever the load reads.
+    assert advance(2.5, user=60, nice=40) == pytest.approx(0.6)
+    assert gate.should_pause(0.75, paused=False, now=2.5) and gate.probes == 1
+    # Within the probe's period the old reading does not decide.
+    assert gate.should_pause(0.75, paused=True, now=2.7)
+    # With the check stopped the frames take 85 of 100: it stays paused (a busy pause) ...
+    assert advance(3.0, user=85, idle=15) == pytest.approx(0.85)
+    assert gate.should_pause(0.75, paused=True, now=3.0) and gate.busy_pauses == 1
+    # ... until the load is below RESUME_FRACTION of the limit.
+    assert advance(3.5, user=70, idle=30) == pytest.approx(0.7)
+    assert gate.should_pause(0.75, paused=True, now=3.5)
+    assert advance(4.0, user=50, idle=50) == pytest.approx(0.5)
+    assert not gate.should_pause(0.75, paused=True, now=4.0)
+    # A probe that finds room lets the check go on at once, and is not a busy pause.
+    assert advance(6.0, user=50, nice=50) == pytest.approx(0.5)
+    assert gate.should_pause(0.75, paused=False, now=6.0) and gate.probes == 2
+    assert advance(6.5, user=55, idle=45) == pytest.approx(0.55)
+    assert not gate.should_pause(0.75, paused=True, now=6.5) and gate.busy_pauses == 1
+    # A new check starts its own 2 s; 1 = never held back, not even by a probe.
+    gate.check_ended()
+    assert not gate.should_pause(0.75, paused=False, now=7.0)
+    assert not gate.should_pause(1.0, paused=False, now=20.0)

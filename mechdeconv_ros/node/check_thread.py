@@ -11,6 +11,8 @@ that made it (:meth:`CheckThread.offer`: a dict swap and one ``np.copy``). A che
 when the load rises above ``check.max_load`` is paused (SIGSTOP to its process) until the load
 is below 0.8 of it: an idle-priority process still shares the memory bus and the cache (in
 two runs a node paced at its serial bound delivered 4-5 % fewer frames with the check on).
+Every 2 s of running the check is stopped for one load period, so that the load is also read
+without it (a node the check slows uses less CPU: the gate's probes).
 ``check_deferred``, ``check_pauses`` and ``check_cpu_load`` in ``/diagnostics`` show what the
 gate did.
 
@@ -100,7 +102,6 @@ class CheckThread:
         # The machine's load: read and written by this thread, read by the frame path
         # (offer: one float, no lock needed).
         self._gate = LoadGate()
-        self.pauses = 0
         self._lock = threading.Lock()
         self._pending: tuple[np.ndarray, Any] | None = None
         self._wake = threading.Event()
@@ -174,17 +175,17 @@ class CheckThread:
         frame is being sent: a stopped process would stop the send). Never waits for the stop
         lock: a stop in progress continues the process itself.
         """
-        self._sample_load()
+        now = time.monotonic()
+        self._counters['check_cpu_load'] = self._gate.sample(now)
         worker = self._worker
-        paused = self._gate.should_pause(float(self._value('check.max_load')), worker.paused)
+        paused = self._gate.should_pause(float(self._value('check.max_load')), worker.paused,
+                                         now)
+        self._counters['check_pauses'] = self._gate.busy_pauses
         if paused == worker.paused or not self._worker_lock.acquire(blocking=False):
             return
         try:
             if not self._stop:
                 worker.pause(paused)
-                if paused:
-                    self.pauses += 1
-                    self._counters['check_pauses'] = self.pauses
         finally:
             self._worker_lock.release()
 
@@ -214,6 +215,7 @@ class CheckThread:
             finally:
                 # The period runs from the end of a check: the thread idles at least
                 # 1 / check.rate_hz between checks, however long one takes.
+                self._gate.check_ended()
                 self._last_offer = time.monotonic()
                 self._busy = False
 
