@@ -163,9 +163,9 @@ class CheckThread:
             self._busy = True
         self._wake.set()
 
-    def _sample_load(self) -> None:
+    def _sample_load(self, now: float) -> None:
         """Read the machine's load if its period has passed (this thread only)."""
-        self._counters['check_cpu_load'] = self._gate.sample(time.monotonic())
+        self._counters['check_cpu_load'] = self._gate.sample(now)
 
     def _pause_for_load(self) -> None:
         """
@@ -176,7 +176,7 @@ class CheckThread:
         lock: a stop in progress continues the process itself.
         """
         now = time.monotonic()
-        self._counters['check_cpu_load'] = self._gate.sample(now)
+        self._sample_load(now)
         worker = self._worker
         paused = self._gate.should_pause(float(self._value('check.max_load')), worker.paused,
                                          now)
@@ -198,7 +198,8 @@ class CheckThread:
             self._start_worker()     # now, not at the first check: its imports take a second
         while not self._stop:
             woke = self._wake.wait(WAIT_S)
-            self._sample_load()     # every WAIT_S at least: the gate's load stays fresh
+            # Every WAIT_S at least: the gate's load stays fresh.
+            self._sample_load(time.monotonic())
             if not woke:
                 self._stop_worker_if_off()
                 continue
