@@ -23,7 +23,7 @@ the same publisher and probe, every process with
 * **p50** = probe receive - stamp (two hops, as node_latency), median over the window;
 * **CPU ms / frame** of the relay process per thread (``/proc/PID/task``): the executor
   (main) thread, the rebuild and summary threads (named by
-  :func:`mechdeconv_ros.imaging.live_model.name_native_thread`), and every other thread (OpenCV's
+  :func:`mechdeconv_ros.runtime.live_model.name_native_thread`), and every other thread (OpenCV's
   workers, Fast DDS's) over the window.
 
 Stage values are medians over the window's frames (so the stages need not add up to the p50

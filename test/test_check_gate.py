@@ -1,12 +1,12 @@
 # Copyright 2026 The mechdeconv_ros Authors.
 # SPDX-License-Identifier: Apache-2.0
-"""The check's gate on the machine's load (imaging/check_gate.py): closed forms, no ROS."""
+"""The check's gate on the machine's load (runtime/check_gate.py): closed forms, no ROS."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from mechdeconv_ros.imaging.check_gate import (
+from mechdeconv_ros.runtime.check_gate import (
     busy_fraction, LoadGate, PROC_STAT, read_counters, RESUME_FRACTION)
 import pytest
 

@@ -9,7 +9,7 @@ for the test: checks further apart than the diagnostics period) must publish wha
 check computes in-process, WARN, and with ``check.apply`` set the offset on itself
 (``get_parameters`` shows it) within the tolerance of the truth; every output frame equals
 the in-process correction by the model of its own camera_info (no frame mixes two models).
-The check runs in a child process of the node at nice 19 (imaging/check_worker.py):
+The check runs in a child process of the node at nice 19 (runtime/check_worker.py):
 restarted when it dies, not stopped by SIGINT to the node's group, gone when the node has
 exited (0); held back while the machine's CPUs are busier than ``check.max_load``.
 """

@@ -1,7 +1,7 @@
 # Copyright 2026 The mechdeconv_ros Authors.
 # SPDX-License-Identifier: Apache-2.0
 """
-The check's child process (imaging/check_worker.py), without ROS.
+The check's child process (runtime/check_worker.py), without ROS.
 
 It must give the in-process check's result (the window pooled, a new current model judged),
 receive a model once (only when it changes), run at nice 19 and SCHED_IDLE, ignore SIGINT,
@@ -20,9 +20,9 @@ from typing import Iterator
 
 from check_scenes import featureless, grid, Lens, PIXEL_MM
 from mechdeconv_ros.imaging import plumb_check as pc
-from mechdeconv_ros.imaging.check_worker import CheckWorker, portable, WorkerGone
 from mechdeconv_ros.imaging.remap import build_float_maps, Rectifier
 from mechdeconv_ros.model.model import build_model
+from mechdeconv_ros.runtime.check_worker import CheckWorker, portable, WorkerGone
 from mechdeconv_ros.schema.params import defaults, load_params_file
 import psutil
 import pytest
@@ -102,7 +102,7 @@ def test_no_orphan_when_the_parent_is_killed(paused: bool) -> None:
     # Running: its socket's EOF ends it. Paused (SIGSTOP, the node's CPU gate): it cannot
     # read, PR_SET_PDEATHSIG kills it.
     code = ('import sys, time\n'
-            'from mechdeconv_ros.imaging.check_worker import CheckWorker\n'
+            'from mechdeconv_ros.runtime.check_worker import CheckWorker\n'
             'w = CheckWorker()\nw.start()\nif len(sys.argv) > 1:\n'
             # Paused once it serves (its nice 19 is set after the death signal), as in a check.
             '    import psutil\n    child = psutil.Process(w.process.pid)\n'
@@ -124,7 +124,7 @@ def test_no_orphan_when_the_parent_is_killed(paused: bool) -> None:
 
 def test_a_paused_child_waits_then_answers_and_stops_at_once(
         worker: CheckWorker, models: tuple[object, object]) -> None:
-    """The node pauses a check (SIGSTOP) while the CPUs are busy (imaging/check_gate.py)."""
+    """The node pauses a check (SIGSTOP) while the CPUs are busy (runtime/check_gate.py)."""
     model = models[0]
     blank = featureless(Lens('fisheye'))
     child = psutil.Process(worker.process.pid)

@@ -25,7 +25,7 @@ MAX_LINES = 800
 #: One job per function: none of the package's functions is longer (def to last line).
 MAX_FUNCTION_LINES = 80
 #: The subpackages of mechdeconv_ros, bottom layer first.
-LAYERS = ('schema', 'optics', 'lenses', 'model', 'imaging', 'node', 'tools')
+LAYERS = ('schema', 'optics', 'lenses', 'model', 'imaging', 'runtime', 'node', 'tools')
 #: Circles that exist and are being removed elsewhere (none: the benchmarks' circle
 #: node_latency -> report -> node_latency / speed was removed on branch perf, issue 21).
 KNOWN_CIRCLES: set[frozenset[str]] = set()

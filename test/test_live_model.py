@@ -16,9 +16,9 @@ from __future__ import annotations
 import threading
 from typing import Any, Iterator, Mapping
 
-from mechdeconv_ros.imaging.live_model import (
-    FrameDropped, LiveModel, MAX_SURFACES, NOMINAL_SIZE, THREAD_NAME)
 from mechdeconv_ros.imaging.remap import Rectifier
+from mechdeconv_ros.runtime.live_model import (
+    FrameDropped, LiveModel, MAX_SURFACES, NOMINAL_SIZE, THREAD_NAME)
 from mechdeconv_ros.schema.params import defaults
 import pytest
 

@@ -3,7 +3,7 @@
 """
 How a model's maps are built for the frames, and what is logged about them (no ROS).
 
-The live model (:class:`~mechdeconv_ros.imaging.live_model.LiveModel`) calls
+The live model (:class:`~mechdeconv_ros.runtime.live_model.LiveModel`) calls
 :meth:`ModelMaps.build` for every model it installs (``build_maps``), in the rebuild thread or,
 for a new frame size, in the executor thread. It decides:
 

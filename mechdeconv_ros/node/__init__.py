@@ -1,7 +1,7 @@
 # Copyright 2026 The mechdeconv_ros Authors.
 # SPDX-License-Identifier: Apache-2.0
 """
-The ROS 2 side: messages, parameters, services, diagnostics and ``correct_node`` (layer 5).
+The ROS 2 side: messages, parameters, services, diagnostics and ``correct_node`` (layer 6).
 
 Everything that knows rclpy or a ROS message type lives here (image and CameraInfo conversion,
 compressed transport, the hardened parameter services, ``/diagnostics``, the lens-state

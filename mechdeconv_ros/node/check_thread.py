@@ -5,7 +5,7 @@ The node's live self-check: a coordinator thread here, the work in a child proce
 
 At most ``check.rate_hz`` times a second, counted from the end of the last check (0 = off),
 and only while the machine's CPU load (its busy fraction over the last second, niced work
-such as the check's own not counted: :mod:`~mechdeconv_ros.imaging.check_gate`) is at most
+such as the check's own not counted: :mod:`~mechdeconv_ros.runtime.check_gate`) is at most
 ``check.max_load``, the frame callback hands over a COPY of a corrected frame with the model
 that made it (:meth:`CheckThread.offer`: a dict swap and one ``np.copy``). A check in progress
 when the load rises above ``check.max_load`` is paused (SIGSTOP to its process) until the load
@@ -17,7 +17,7 @@ without it (a node the check slows uses less CPU: the gate's probes).
 gate did.
 
 The thread (nice 19 on Linux) sends the frame to the check's child process
-(:mod:`~mechdeconv_ros.imaging.check_worker`: nice 19, no ROS in it; started with the
+(:mod:`~mechdeconv_ros.runtime.check_worker`: nice 19, no ROS in it; started with the
 thread when ``check.rate_hz`` > 0, else at the first check) and waits for the reply with the
 interpreter lock released: the seconds of Python of a check no longer share the frame path's
 lock (a model is pickled, about 1 ms, only when it changes). The child detects
@@ -48,9 +48,9 @@ import threading
 import time
 from typing import Any, Callable
 
-from mechdeconv_ros.imaging.check_gate import LoadGate
-from mechdeconv_ros.imaging.check_worker import CheckWorker, WorkerGone
 from mechdeconv_ros.imaging.plumb_check import CheckResult, ESTIMATED, to_apply
+from mechdeconv_ros.runtime.check_gate import LoadGate
+from mechdeconv_ros.runtime.check_worker import CheckWorker, WorkerGone
 import numpy as np
 from rclpy.parameter import Parameter
 
@@ -143,7 +143,7 @@ class CheckThread:
         Hand over a corrected frame, if the rate, the load and the thread allow (frame path).
 
         Every frame of a static model comes here (executor thread). Above ``check.max_load``
-        (the machine's load, :mod:`~mechdeconv_ros.imaging.check_gate`, read by this
+        (the machine's load, :mod:`~mechdeconv_ros.runtime.check_gate`, read by this
         object's thread) no check starts: the next chance is a period later. A check in
         progress is paused by the thread (:meth:`_pause_for_load`).
 

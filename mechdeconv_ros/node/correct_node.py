@@ -15,7 +15,7 @@ header; Bayer input is demosaiced first, by ``debayer``, and published as rgb8 /
 
 Wiring only: :mod:`~mechdeconv_ros.node.ros_params` declares the schema,
 :mod:`~mechdeconv_ros.node.param_services` hardens the set services,
-:class:`~mechdeconv_ros.imaging.live_model.LiveModel` holds values, validation, the rebuild
+:class:`~mechdeconv_ros.runtime.live_model.LiveModel` holds values, validation, the rebuild
 thread, the atomic swap and frame-size following (its docstring: which thread touches what),
 :class:`~mechdeconv_ros.imaging.model_maps.ModelMaps` decides how each model's maps are built
 (static, moving, colour, gain) and what is logged about them, :mod:`~mechdeconv_ros.node.topics`
@@ -56,8 +56,6 @@ import time
 from typing import Any, Callable
 
 from mechdeconv_ros.imaging.debayer import Demosaicer
-from mechdeconv_ros.imaging.live_model import (  # noqa: F401 - MAX_SURFACES: the node's limit
-    changes_of, FrameDropped, LiveModel, MAX_SURFACES)
 from mechdeconv_ros.imaging.model_maps import ModelMaps
 from mechdeconv_ros.imaging.moving_maps import MovingRectifier
 from mechdeconv_ros.imaging.remap import set_remap_threads
@@ -73,6 +71,8 @@ from mechdeconv_ros.node.param_services import guard_parameter_services
 from mechdeconv_ros.node.ros_params import declare_schema
 from mechdeconv_ros.node.stage_clock import stage_clock_from_env, StageClock
 from mechdeconv_ros.node.topics import create_outputs, LazyInput
+from mechdeconv_ros.runtime.live_model import (  # noqa: F401 - MAX_SURFACES: the node's limit
+    changes_of, FrameDropped, LiveModel, MAX_SURFACES)
 from mechdeconv_ros.schema.params import SCHEMA
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup

@@ -5,7 +5,7 @@ The node's /diagnostics: frame counters and one DiagnosticStatus from the live m
 
 The status is named after the node's fully qualified name (``/left/correct_node: lens
 correction``), so two cameras' nodes are told apart. Its values are the model revision and
-rebuild counters (:class:`mechdeconv_ros.imaging.live_model.LiveStatus`), the frame counters and
+rebuild counters (:class:`mechdeconv_ros.runtime.live_model.LiveStatus`), the frame counters and
 timings (:class:`FrameStats`, per diagnostics period) and the lens summary
 (``LensModel.report()`` flattened to dotted keys, e.g. ``fov_deg.horizontal``, and the corner
 relative illumination ``relative_illumination.corner_ri``), and whether the vignetting
@@ -27,7 +27,7 @@ import time
 from typing import Any, Callable, Iterable, Mapping
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from mechdeconv_ros.imaging.live_model import LiveStatus
+from mechdeconv_ros.runtime.live_model import LiveStatus
 from rclpy.node import Node
 
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 import sys
 from typing import Any, Iterable, Mapping
 
-from mechdeconv_ros.imaging.live_model import check_length, plain
+from mechdeconv_ros.runtime.live_model import check_length, plain
 from mechdeconv_ros.schema.params import coerce, ParamSpec, ParamValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.exceptions import (

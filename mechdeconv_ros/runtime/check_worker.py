@@ -17,7 +17,7 @@ inherits no ROS state, only the socket), which:
   SIGINT to its process group and must exit 0; its parent stops the child);
 * exits when its end of the socket pair closes (the parent stopped, or died, even by
   SIGKILL: the kernel closes the parent's end), after the check it is in, if any; while
-  paused (SIGSTOP: the node's CPU gate, :mod:`~mechdeconv_ros.imaging.check_gate`) it cannot
+  paused (SIGSTOP: the node's CPU gate, :mod:`~mechdeconv_ros.runtime.check_gate`) it cannot
   read, so it also asks Linux to SIGKILL it when its parent dies (PR_SET_PDEATHSIG).
 
 Protocol, over a :class:`multiprocessing.connection.Connection` on a Unix socket pair, one
@@ -67,7 +67,7 @@ THREAD_ENV = {'OMP_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1', 'MKL_NUM_THRE
 #: The child's command: SIGINT ignored before anything else is imported (a node stopped while
 #: its child still imports numpy must not leave a KeyboardInterrupt traceback), then main().
 BOOTSTRAP = ('import signal, sys; signal.signal(signal.SIGINT, signal.SIG_IGN); '
-             'from mechdeconv_ros.imaging.check_worker import main; sys.exit(main())')
+             'from mechdeconv_ros.runtime.check_worker import main; sys.exit(main())')
 
 
 class WorkerGone(RuntimeError):
