@@ -11,11 +11,10 @@ Geometry (docs/underwater.md)
 -----------------------------
 Flat port: a plate of thickness t whose inner face meets the axis at z_i = -d (d =
 ``port.distance_mm``) and whose outer face is parallel to it, t further toward the scene. Its
-plane is turned about the point (0, 0, -d): first by tilt_x about the x axis, then by tilt_y
-about the (fixed) y axis, so its normal toward the lens is n = R_y(b) R_x(a) e_z with
-
-    R_x(a) e_y = (0, cos a, sin a),   R_y(b) e_x = (cos b, 0, sin b):
-
+plane is turned about the point (0, 0, -d) as every tilted plane (docs/design.md section 1.1,
+:func:`mechdeconv_ros.optics.pose.tilt_rotation`): first by tilt_x about its row (x) line, then
+by tilt_y about its own turned column line, so its normal toward the lens is
+:func:`~mechdeconv_ros.optics.pose.port_normal`, ``n = (-sin b, -sin a cos b, cos a cos b)``:
 a positive tilt_x brings the part of the port at y > 0 (seen at larger v) closer to the lens,
 a positive tilt_y the part at x > 0 (larger u).
 
@@ -40,6 +39,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 import math
 
+from mechdeconv_ros.optics.pose import port_normal
 from mechdeconv_ros.optics.prescription import (
     paraxial_matrix, Prescription, Surface, surfaces_before)
 from mechdeconv_ros.optics.surfaces import refract
@@ -94,10 +94,7 @@ class Port:
 
     def normal(self) -> np.ndarray:
         """Return the flat port's unit normal toward the lens (module docstring)."""
-        a, b = self.tilt_x_rad, self.tilt_y_rad
-        n = np.array([0.0, -math.sin(a), math.cos(a)])
-        return np.array([n[0] * math.cos(b) - n[2] * math.sin(b), n[1],
-                         n[0] * math.sin(b) + n[2] * math.cos(b)])
+        return port_normal(self.tilt_x_rad, self.tilt_y_rad)
 
 
 def entrance_pupil_z(lens: Prescription) -> float:
