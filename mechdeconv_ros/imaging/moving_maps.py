@@ -48,7 +48,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import cv2
 from mechdeconv_ros.lenses.lens_table import LensState, Mechanism, values_at
-from mechdeconv_ros.model.assembly import raw_from_normalised
+from mechdeconv_ros.model.projection import raw_from_normalised
 import numpy as np
 import numpy.typing as npt
 

@@ -11,17 +11,15 @@ the model's exact inverse to directions, fits to each chain the plane through th
 that minimises the sum of squared sines ``(n . d)^2`` (``n`` the eigenvector of the smallest
 eigenvalue of ``sum d d^T``), and reads the residuals.
 
-The inverse for any assembly (:class:`ChiefLines`; the same equations as
-:mod:`mechdeconv_ros.model.assembly`): the chief ray of field angle theta and azimuth phi runs
-in image space along ``rho(z) = h(theta) + s(theta) (z - z_s)`` (``h`` the real height on the
-model's sensor plane ``z_s``, ``s`` its slope). The pose vector ``p = (dx, dy, alpha, beta,
-dz)`` puts the sensor's axis pixel at ``((W - 1) / 2 + dx / p_x, (H - 1) / 2 + dy / p_y)``,
-turns it by ``R = R_x(alpha) R_y(beta)`` and moves it ``dz`` along the axis from ``z_s`` (mm,
-> 0 away from the lens). A pixel at in-plane offsets ``(a, b)`` (mm, along rows and columns
-from the axis pixel) is the point ``Q = R (a, b, 0)`` from the axis point; its direction has
-``phi = atan2(Q_y, Q_x)`` and theta solving ``h(theta) + s(theta) (Q_z + dz) = hypot(Q_x,
-Q_y)`` (Newton on a dense uniform table of ``h`` and ``s``). The direction is ``(sin theta cos
-phi, sin theta sin phi, cos theta)`` in the camera's optical frame (X right, Y down, Z ahead).
+The inverse for any assembly (:class:`ChiefLines`) is the projection's
+(:meth:`mechdeconv_ros.model.projection.LineTable.directions_and_scales`: the same sensor
+geometry, :mod:`mechdeconv_ros.optics.pose`, on a dense table of the chief-ray lines ``h``,
+``s`` with Newton, for many points). The pose vector ``p = (dx, dy, alpha, beta, dz)`` is the
+sensor's ``(sensor.axis_offset_x_mm, _y_mm, sensor.tilt_x_deg, _y_deg)`` (docs/design.md
+section 1.1: the axis pixel ``((W - 1) / 2 + dx / p_x, (H - 1) / 2 + dy / p_y)``, the plane
+turned by ``T = R_x(-alpha) R_y(beta)``) and a defocus ``dz`` along the axis from ``z_s`` (mm,
+> 0 away from the lens). The direction is ``(sin theta cos phi, sin theta sin phi, cos theta)``
+in the camera's optical frame (X right, Y down, Z ahead).
 
 Straightness in px of the corrected image: for a ``pinhole`` output, the points' corrected
 pixels (``x = f_x X / Z + c_x``, within the image) get a total-least-squares line each and
@@ -36,15 +34,11 @@ from dataclasses import dataclass
 import math
 from typing import Any
 
-from mechdeconv_ros.model.radial_map import hermite
+from mechdeconv_ros.model.projection import LineTable
+from mechdeconv_ros.optics.pose import SensorPose
 import numpy as np
 import numpy.typing as npt
 
-#: Samples of the dense table of h(theta), s(theta) the inverse interpolates linearly (its
-#: error h'' dtheta^2 / 8 is below 1e-8 mm for the wide-angle and fisheye configs).
-TABLE_SAMPLES = 8192
-#: Newton steps of the inverse from the untilted root.
-NEWTON_STEPS = 4
 #: A chain is cut where it leaves a great circle by more than this (px at the output focal
 #: length) or this fraction of its length, whichever is larger.
 SPLIT_PX = 1.5
@@ -62,22 +56,11 @@ COVERAGE_CELLS = 8
 Points = npt.NDArray[np.float64]
 
 
-def rotation(alpha_rad: float, beta_rad: float) -> npt.NDArray[np.float64]:
-    """Return ``R = R_x(alpha) R_y(beta)`` (columns: the sensor's row, column and normal)."""
-    ca, sa = math.cos(alpha_rad), math.sin(alpha_rad)
-    cb, sb = math.cos(beta_rad), math.sin(beta_rad)
-    rx = np.array([[1.0, 0.0, 0.0], [0.0, ca, sa], [0.0, -sa, ca]])
-    ry = np.array([[cb, 0.0, sb], [0.0, 1.0, 0.0], [-sb, 0.0, cb]])
-    return rx @ ry
-
-
 @dataclass
 class ChiefLines:
     """The model's chief-ray lines on a dense table, and the raw frame's geometry."""
 
-    theta: npt.NDArray[np.float64]
-    height: npt.NDArray[np.float64]
-    slope: npt.NDArray[np.float64]
+    table: LineTable
     width: int
     height_px: int
     pixel_mm: tuple[float, float]
@@ -87,21 +70,10 @@ class ChiefLines:
         """
         Tabulate a :class:`~mechdeconv_ros.model.model.LensModel`'s field trace.
 
-        Its slopes are the traced ones when the trace holds them, else ``h / v`` (rays
-        through the rear principal point).
-
         :param model: the lens model.
-        :return: the table.
+        :return: the table (:meth:`~mechdeconv_ros.model.projection.LineTable.of`).
         """
-        field = model.field_curve
-        theta0 = np.asarray(field.field_angle_rad, dtype=np.float64)
-        h0 = np.asarray(field.real_mm, dtype=np.float64)
-        s0 = getattr(field, 'slope', None)
-        if s0 is None:
-            s0 = h0 / model.image_distance_mm
-        theta = np.linspace(0.0, float(theta0[-1]), TABLE_SAMPLES)
-        return cls(theta, hermite(theta0, h0, theta), hermite(theta0, np.asarray(s0), theta),
-                   model.width, model.height, model.pixel_mm)
+        return cls(LineTable.of(model), model.width, model.height, model.pixel_mm)
 
     def directions(self, points: Points, pose: npt.NDArray[np.float64]) -> Points:
         """
@@ -118,51 +90,18 @@ class ChiefLines:
         """
         Return the directions and, at each, the raw px per rad under the same pose.
 
-        Radial: ``(dh / dtheta + ds / dtheta (Q_z + dz)) / p`` (a step of the field angle);
-        tangential: ``hypot(Q_x, Q_y) / (p sin theta)`` (a step across the azimuth), ``p``
-        the geometric mean pixel pitch. Taken at the pose being judged, so a pose that
-        shrinks the angle a raw pixel spans does not shrink the edges' raw noise with it
-        (docs/design.md section 2.17).
+        Taken at the pose being judged, so a pose that shrinks the angle a raw pixel spans
+        does not shrink the edges' raw noise with it (docs/design.md section 2.17).
 
         :param points: ``(N, 2)`` raw (x, y).
         :param pose: ``(dx_mm, dy_mm, alpha_deg, beta_deg, dz_mm)``.
-        :return: ``(directions (N, 3), radial (N,), tangential (N,))``; NaN outside the field.
+        :return: ``(directions (N, 3), radial (N,), tangential (N,))``; NaN outside the field
+            (:meth:`~mechdeconv_ros.model.projection.LineTable.directions_and_scales`).
         """
-        px, py = self.pixel_mm
-        a = (points[:, 0] - (self.width - 1) / 2.0 - pose[0] / px) * px
-        b = (points[:, 1] - (self.height_px - 1) / 2.0 - pose[1] / py) * py
-        r = rotation(math.radians(pose[2]), math.radians(pose[3]))
-        qx = r[0, 0] * a + r[0, 1] * b
-        qy = r[1, 0] * a + r[1, 1] * b
-        dz = r[2, 0] * a + r[2, 1] * b + pose[4]
-        radius = np.hypot(qx, qy)
-        phi = np.arctan2(qy, qx)
-        theta = self._solve(radius, dz)
-        sin_t = np.sin(theta)
-        dirs = np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), np.cos(theta)], axis=1)
-        pitch = math.sqrt(px * py)
-        with np.errstate(invalid='ignore'):
-            radial = (np.interp(theta, self.theta, np.gradient(self.height, self.theta))
-                      + dz * np.interp(theta, self.theta, np.gradient(self.slope, self.theta)))
-        radial = radial / pitch
-        with np.errstate(invalid='ignore', divide='ignore'):
-            tangential = np.where(theta > 1e-6, radius / (pitch * sin_t), radial)
-        return dirs, radial, tangential
-
-    def _solve(self, radius: Points, dz: Points) -> Points:
-        """Solve ``h(theta) + s(theta) dz = radius`` on the table (linear pieces)."""
-        t, h, s = self.theta, self.height, self.slope
-        step = float(t[1] - t[0])
-        theta = np.interp(radius, h, t)
-        for _ in range(NEWTON_STEPS):
-            k = np.clip((theta / step).astype(np.int64), 0, t.size - 2)
-            frac = theta / step - k
-            value = h[k] + frac * (h[k + 1] - h[k]) + dz * (s[k] + frac * (s[k + 1] - s[k]))
-            slope = (h[k + 1] - h[k] + dz * (s[k + 1] - s[k])) / step
-            with np.errstate(invalid='ignore', divide='ignore'):
-                theta = theta - (value - radius) / slope
-        bad = ~np.isfinite(theta) | (theta < 0.0) | (theta > t[-1])
-        return np.where(bad, np.nan, theta)
+        sensor = SensorPose(float(pose[0]), float(pose[1]), math.radians(pose[2]),
+                            math.radians(pose[3]))
+        return self.table.directions_and_scales(sensor, points, (self.width, self.height_px),
+                                                self.pixel_mm, float(pose[4]))
 
 
 def edge_index(edges: list[Points]) -> npt.NDArray[np.int64]:

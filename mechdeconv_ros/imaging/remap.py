@@ -34,9 +34,9 @@ from typing import Any, Sequence
 import cv2
 from mechdeconv_ros.imaging.channel_remap import ChannelRemap
 from mechdeconv_ros.model import underwater
-from mechdeconv_ros.model.assembly import curve_tables, MapForm
 from mechdeconv_ros.model.lateral_color import channel_model
 from mechdeconv_ros.model.model import LensModel
+from mechdeconv_ros.model.projection import curve_tables, MapForm
 from mechdeconv_ros.optics.illumination import Illumination
 import numpy as np
 import numpy.typing as npt
@@ -154,7 +154,7 @@ def _build_general_maps(model: LensModel, gain_table: npt.NDArray[np.float64] | 
 
     For a principal point off the half-pixel grid or outside the output, which
     :func:`~mechdeconv_ros.model.model.build_model` never makes; the same equations as
-    :func:`mechdeconv_ros.model.assembly.raw_from_normalised`.
+    :func:`mechdeconv_ros.model.projection.raw_from_normalised`.
     """
     ow, oh = model.out_width, model.out_height
     form = MapForm.of(model)
@@ -286,7 +286,7 @@ def _build_tilted_maps(model: LensModel, gain_table: npt.NDArray[np.float64] | N
 
     ``g`` and ``sigma`` (and the gain) depend on the ideal radius only: they are looked up on
     the quadrant (one ``cv2.remap``, as the centred maps); the plane intersection
-    (:class:`~mechdeconv_ros.model.assembly.MapForm`) is not symmetric and runs per pixel, in
+    (:class:`~mechdeconv_ros.model.projection.MapForm`) is not symmetric and runs per pixel, in
     bands of rows that stay in cache, each band unfolding its rows of the quadrant first.
     """
     ow, oh = model.out_width, model.out_height

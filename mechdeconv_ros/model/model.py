@@ -57,17 +57,18 @@ from mechdeconv_ros.lenses.lens_params import make_prescription
 from mechdeconv_ros.lenses.lens_source import LensSource
 from mechdeconv_ros.lenses.sources import source_for
 from mechdeconv_ros.model import lateral_color, underwater
-from mechdeconv_ros.model.assembly import (
-    axis_pixel, check_pose, raw_from_normalised, SensorPose, unproject_angles)
+from mechdeconv_ros.model.assembly import check_pose
 from mechdeconv_ros.model.camera_info_fit import (
     boundary_points, choose_equivalent, EQUIVALENT_MAX_ERROR_PX, EquivalentFit, fit_equivalent,
     raw_probe_points)
 from mechdeconv_ros.model.camera_info_tilt import fit_tilted
 from mechdeconv_ros.model.lateral_color import LateralColor
+from mechdeconv_ros.model.projection import raw_from_normalised, unproject_angles
 from mechdeconv_ros.model.radial_map import (
     COARSE_SAMPLES, CURVE_SAMPLES, field_cap_rad, projected, RadialMap, resample, trace_curve)
 from mechdeconv_ros.model.summary import summarize
 from mechdeconv_ros.optics.illumination import Illumination
+from mechdeconv_ros.optics.pose import SensorPose
 from mechdeconv_ros.optics.prescription import Prescription
 from mechdeconv_ros.schema.params import check_values, INTERPOLATIONS, MAX_FRAME_PIXELS, ParamValue
 import numpy as np
@@ -348,7 +349,7 @@ def build_model(values: Mapping[str, Any], width: int = 0, height: int = 0, *,
     refusals.check_circle_of_confusion(vals, f, w * px, h * py)
     fx, fy = v / px, v / py
     # The principal point is where the lens axis meets the sensor (sensor.axis_offset_*).
-    cx, cy = axis_pixel(vals, w, h, (px, py))
+    cx, cy = SensorPose.from_values(vals).axis_pixel(w, h, (px, py))
     K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
     projection = str(vals['output.projection'])
     coarse = _trace_field(source, distance, v, half_diagonal_mm(w, h, (px, py)))

@@ -27,9 +27,10 @@ from typing import Any, Callable, Mapping
 
 from mechdeconv_ros.lenses.lens_errors import finite_or_none, FloatArray, scene_distance
 from mechdeconv_ros.lenses.lens_source import LensSource
-from mechdeconv_ros.model import assembly
+from mechdeconv_ros.model.projection import project_angles, unproject_angles
 from mechdeconv_ros.model.radial_map import COARSE_SAMPLES, field_cap_rad, trace_angles
 from mechdeconv_ros.optics import scene_constraints
+from mechdeconv_ros.optics.pose import POSE_PARAMS, SensorPose
 from mechdeconv_ros.optics.raytrace import MAX_CONTINUATION_STEP_RAD
 from mechdeconv_ros.optics.thick_lens import propagate_sigma
 import numpy as np
@@ -176,24 +177,24 @@ def _sensor_pose(model: Any) -> dict[str, Any]:
     their root sum of squares.
     """
     values = model.values
-    theta, phi = assembly.unproject_angles(model, np.array([model.width - 1.0]),
-                                           np.array([model.height - 1.0]))
-    u0, v0 = assembly.project_angles(model, theta, phi)
+    theta, phi = unproject_angles(model, np.array([model.width - 1.0]),
+                                  np.array([model.height - 1.0]))
+    u0, v0 = project_angles(model, theta, phi)
     sigmas: dict[str, float] = {}
-    for name in assembly.POSE_PARAMS:
+    for name in POSE_PARAMS:
         short = name.split('.', 1)[1]
         changed = dict(values, **{name: float(values[name])
                                   + float(values[f'sensor.tolerance.{short}'])})
         K = np.array(model.K, dtype=np.float64)
-        K[0, 2], K[1, 2] = assembly.axis_pixel(changed, model.width, model.height,
-                                               model.pixel_mm)
+        K[0, 2], K[1, 2] = SensorPose.from_values(changed).axis_pixel(
+            model.width, model.height, model.pixel_mm)
         moved = SimpleNamespace(values=changed, K=K, pixel_mm=model.pixel_mm,
                                 field_curve=model.field_curve, source=model.source)
-        u, v = assembly.project_angles(moved, theta, phi)
+        u, v = project_angles(moved, theta, phi)
         sigmas[short] = float(np.hypot(u - u0, v - v0)[0])
     return {
         'axis_px': [float(model.K[0, 2]), float(model.K[1, 2])],
-        **{name.split('.', 1)[1]: float(values[name]) for name in assembly.POSE_PARAMS},
+        **{name.split('.', 1)[1]: float(values[name]) for name in POSE_PARAMS},
         'corner_sigma_px': {**sigmas, 'total': float(math.sqrt(sum(
             x * x for x in sigmas.values())))},
     }

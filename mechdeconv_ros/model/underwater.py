@@ -7,9 +7,9 @@ Pure numpy, no ROS (docs/underwater.md). A model whose source is a
 :class:`~mechdeconv_ros.lenses.port_source.PortedSource` has the radial map of its symmetric
 port (flat untilted, dome centred on the axis; K, D and the remap from it as for any lens).
 
-Projection (:func:`project_points`, ``mechdeconv project``): scene directions (tx, ty) =
-(X/Z, Y/Z) at Z = ``scene.distance_mm`` to raw pixels. A symmetric port: as any lens
-(:func:`mechdeconv_ros.model.assembly.project`, the traced chief-ray lines). A tilted flat
+Projection (``mechdeconv project``): :mod:`mechdeconv_ros.model.projection` owns it
+(:func:`~mechdeconv_ros.model.projection.project_points`, re-exported here with
+``is_exact_3d``): a symmetric port as any lens (the traced chief-ray lines); a tilted flat
 port or a decentred dome: each point's chief ray traced exactly in 3-D
 (:meth:`PortedSource.sensor_points`), pixel = c + (a / p_x, b / p_y).
 
@@ -41,7 +41,7 @@ from typing import Any
 
 from mechdeconv_ros.lenses.lens_errors import FloatArray
 from mechdeconv_ros.lenses.port_source import PortedSource
-from mechdeconv_ros.model.assembly import project
+from mechdeconv_ros.model.projection import is_exact_3d, project_points
 from mechdeconv_ros.optics.ports import entrance_pupil_z
 import numpy as np
 
@@ -50,29 +50,6 @@ KEYS = ('noncentral_error_px_half', 'noncentral_error_px_twice')
 #: Nodes (across, down) of the exact 3-D grid whose spline carries a non-symmetric port into
 #: the remap: test/test_underwater.py measures the interpolation error (docs/underwater.md).
 RESIDUAL_GRID = (97, 55)
-
-
-def is_exact_3d(model: Any) -> bool:
-    """Return True when the model's port breaks the rotational symmetry."""
-    source = model.source
-    return (isinstance(source, PortedSource) and source.port is not None
-            and not source.port.symmetric)
-
-
-def project_points(model: Any, tx: FloatArray, ty: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """
-    Return the raw pixels of scene directions (module docstring), NaN where none passes.
-
-    :param model: a :class:`~mechdeconv_ros.model.model.LensModel`.
-    :param tx: X / Z, any shape.
-    :param ty: Y / Z, same shape.
-    :return: ``(u, v)`` raw pixel coordinates.
-    """
-    tx, ty = np.broadcast_arrays(np.asarray(tx, dtype=float), np.asarray(ty, dtype=float))
-    if is_exact_3d(model):
-        a, b = model.source.sensor_points(tx, ty, float(model.values['scene.distance_mm']))
-        return model.K[0, 2] + a / model.pixel_mm[0], model.K[1, 2] + b / model.pixel_mm[1]
-    return project(model, tx, ty)
 
 
 def noncentral_errors(model: Any) -> dict[str, float | None]:

@@ -305,7 +305,7 @@ def read_directions(path: str) -> np.ndarray:
 def cmd_project(args: argparse.Namespace) -> int:
     """Project scene directions (tx, ty) to raw pixels (u, v): the traced camera."""
     # Exact per point: through a tilted or decentred port in 3-D (docs/underwater.md).
-    from mechdeconv_ros.model.underwater import project_points as project
+    from mechdeconv_ros.model.projection import project_points as project
 
     model = _model(args)
     directions = read_directions(args.input)
