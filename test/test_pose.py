@@ -13,7 +13,7 @@ import math
 
 from mechdeconv_ros.optics.pose import (
     port_normal, rig_rotation, right_from_left, rot_x, rot_y, rot_z, sensor_points,
-    sensor_tilts_of_break, SensorPose, tilt_rotation)
+    sensor_tilts_of_break, SensorPose, tilt_rotation, tilts_from_fixed_axes)
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest
@@ -117,3 +117,16 @@ def test_zemax_break_signs() -> None:
 def test_axis_pixel() -> None:
     pose = SensorPose(offset_x_mm=0.02, offset_y_mm=-0.01)
     assert pose.axis_pixel(641, 481, (0.005, 0.004)) == pytest.approx((324.0, 237.5))
+
+
+@pytest.mark.parametrize('tilt_x, tilt_y', [(1.0, -0.5), (20.0, 30.0), (-40.0, 10.0)],
+                         ids=['small', 'large', 'negative'])
+def test_tilts_from_fixed_axes_keep_the_old_port_plane(tilt_x, tilt_y) -> None:
+    # Before issue 37 the flat port turned about the fixed y axis: n = R_y(b) R_x(a) e_z in the
+    # ports' frame, with R_x(a) e_y = (0, cos a, sin a) and R_y(b) e_x = (cos b, 0, sin b).
+    a, b = math.radians(tilt_x), math.radians(tilt_y)
+    old = np.array([-math.sin(b) * math.cos(a), -math.sin(a), math.cos(a) * math.cos(b)])
+    assert_allclose(port_normal(*tilts_from_fixed_axes(a, b)), old, atol=1e-15)
+    assert tilts_from_fixed_axes(a, 0.0) == pytest.approx((a, 0.0))
+    # Both tilts at once: the two conventions differ (the reason the conversion exists).
+    assert np.max(np.abs(port_normal(a, b) - old)) > 1e-7

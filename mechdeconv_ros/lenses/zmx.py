@@ -51,6 +51,8 @@ from dataclasses import dataclass, field
 import math
 from pathlib import Path
 
+from mechdeconv_ros.optics.pose import rot_x, rot_y, sensor_tilts_of_break
+
 #: Surface types this package traces.
 SUPPORTED_TYPES = ('STANDARD', 'EVENASPH')
 
@@ -577,14 +579,16 @@ def fold_breaks(lens: ZmxLens) -> None:
     it. A break just before the image surface, behind a surface into air, places the sensor
     (docs/design.md section 2.16): Zemax's ``PARM 1, 2`` decenter x, y (lens units), ``PARM 3,
     4`` tilt about x, then about the new y (deg, right-handed), ``PARM 6`` the order (0:
-    decenter then tilt, 1: tilt then decenter); its frame ``F = R_x(a) R_y(b)``. The sensor
+    decenter then tilt, 1: tilt then decenter); its frame ``F = R_x(a) R_y(b)`` (the
+    right-handed rotations of :mod:`mechdeconv_ros.optics.pose`). The sensor
     plane is the image surface's (the break's origin moved by its own thickness along the new
     z); the lens axis meets it at ``z_A`` (the new distance from the last lens surface, so
     ``lens.image_distance_mm``), the sensor centre lies at ``(V - A) . F e_x`` along x and
     ``(V - A) . F e_y`` along y from it, and with the file's +y up in the image (the raw image
     is the inverted image read upright) ``sensor.axis_offset_x_mm = (V - A) . F e_x``,
-    ``axis_offset_y_mm = -(V - A) . F e_y``, ``tilt_x_deg = -a``, ``tilt_y_deg = -b``. A break
-    elsewhere (an element's decenter or tilt), in glass, with a rotation about the axis
+    ``axis_offset_y_mm = -(V - A) . F e_y``, ``tilt_x_deg = -a``, ``tilt_y_deg = -b``
+    (:func:`~mechdeconv_ros.optics.pose.sensor_tilts_of_break`; docs/design.md section 1.1). A
+    break elsewhere (an element's decenter or tilt), in glass, with a rotation about the axis
     (``PARM 5``) or a tilt or decenter beyond the parameters' ranges is refused.
 
     :param lens: the lens as read; changed in place.
@@ -635,12 +639,10 @@ def _place_sensor(lens: ZmxLens, i: int, value: dict[int, float],
                   line: dict[int, int]) -> None:
     """Turn the break before the image into the sensor's pose (see :func:`fold_breaks`)."""
     surface, before = lens.surfaces[i], lens.surfaces[i - 1]
-    a, b = math.radians(value[3]), math.radians(value[4])
-    ca, sa, cb, sb = math.cos(a), math.sin(a), math.cos(b), math.sin(b)
-    # F = R_x(a) R_y(b): its columns are the new x, y, z axes in the lens frame.
-    ex = (cb, sa * sb, -ca * sb)
-    ey = (0.0, ca, sa)
-    ez = (sb, -sa * cb, ca * cb)
+    # F = R_x(a) R_y(b) (right-handed, docs/design.md section 1.1): its columns are the new
+    # x, y, z axes in the lens frame.
+    frame = rot_x(math.radians(value[3])) @ rot_y(math.radians(value[4]))
+    ex, ey, ez = (tuple(float(x) for x in frame[:, k]) for k in range(3))
     dx, dy = value[1] * lens.unit_mm, value[2] * lens.unit_mm
     z_break = before.thickness or 0.0
     if value[6]:
@@ -661,14 +663,16 @@ def _place_sensor(lens: ZmxLens, i: int, value: dict[int, float],
                                   f'off the axis along {name}: beyond sensor.axis_offset_'
                                   f'{name}_mm')
     before.thickness = z_axis
+    tilt_x, tilt_y = sensor_tilts_of_break(value[3], value[4])
     lens.sensor_pose = {'sensor.axis_offset_x_mm': offsets[0],
                         'sensor.axis_offset_y_mm': offsets[1],
-                        'sensor.tilt_x_deg': -value[3], 'sensor.tilt_y_deg': -value[4]}
+                        'sensor.tilt_x_deg': tilt_x, 'sensor.tilt_y_deg': tilt_y}
     lens.notes.append(
         f'surface {surface.number} (line {surface.type_line}): the coordinate break before the '
         f'image surface places the sensor: axis offset {offsets[0]:.6g}, {offsets[1]:.6g} mm, '
-        f'tilt {-value[3]:g}, {-value[4]:g} deg (sensor.axis_offset_*, sensor.tilt_*); the '
-        f'axis meets it {z_axis:.6g} mm behind the last lens surface')
+        f'tilt {tilt_x:g}, {tilt_y:g} deg (sensor.axis_offset_*, sensor.tilt_*: the tilts '
+        f'{value[3]:g}, {value[4]:g} deg of the break with their signs changed); the axis '
+        f'meets it {z_axis:.6g} mm behind the last lens surface')
     del lens.surfaces[i]
 
 

@@ -111,6 +111,22 @@ def port_normal(tilt_x: float, tilt_y: float) -> Array:
     return np.array([-t[0, 2], -t[1, 2], t[2, 2]])
 
 
+def tilts_from_fixed_axes(tilt_x: float, tilt_y: float) -> tuple[float, float]:
+    """
+    Return the tilts that turn a plane as ``tilt_x`` then ``tilt_y`` about the FIXED y axis.
+
+    The flat port's convention before issue 37 (``n = R_y R_x``, optiland's ``rx``, ``ry``
+    order): the same plane (normal) in this module's convention has ``sin b' = sin b cos a``
+    and ``sin a' = sin a / cos b'``. Single tilts are unchanged.
+
+    :param tilt_x: rad, applied first.
+    :param tilt_y: rad, about the fixed y axis.
+    :return: ``(tilt_x', tilt_y')`` in rad for :func:`tilt_rotation` / :func:`port_normal`.
+    """
+    b = math.asin(math.sin(tilt_y) * math.cos(tilt_x))
+    return math.asin(math.sin(tilt_x) / math.cos(b)), b
+
+
 def rig_rotation(rx_deg: float, ry_deg: float, rz_deg: float) -> Matrix:
     """
     Return a stereo rig's rotation ``R = R_x(rx) R_y(ry) R_z(rz)`` (module docstring).

@@ -171,8 +171,9 @@ UNDERWATER_SPECS: tuple[ParamSpec, ...] = (
        'meets its inner face; > 0 brings the part seen at larger v (image rows further down) '
        'closer to the lens. Applied first.', -45.0, 45.0),
     _d('port.tilt_y_deg', 0.0, 'deg',
-       'Flat port: then turned about its column (y) line; > 0 brings the part seen at larger '
-       'u (further right) closer to the lens.', -45.0, 45.0),
+       'Flat port: then turned about its own (tilted) column line, as sensor.tilt_y_deg; > 0 '
+       'brings the part seen at larger u (further right) closer to the lens (before issue 37 '
+       'it turned about the fixed y axis: docs/design.md section 1.1).', -45.0, 45.0),
     _d('port.radius_mm', 50.0, 'mm', 'Dome port: radius of its inner surface; > 0.',
        0.0, 1.0e4),
     _d('port.center_offset_mm', 0.0, 'mm',
@@ -312,8 +313,9 @@ SCHEMA: tuple[ParamSpec, ...] = (
        'v closer to the lens (on-axis image distance unchanged).',
        -MAX_TILT_DEG, MAX_TILT_DEG),
     _d('sensor.tilt_y_deg', 0.0, 'deg',
-       'Sensor tilt about its (tilted) column line through the axis point, applied after '
-       'tilt_x as a Zemax coordinate break; > 0 brings the columns of larger u closer.',
+       'Sensor tilt about its (tilted) column line through the axis point, after tilt_x (a '
+       ".zmx break's tilts a, b import as -a, -b); > 0 brings the columns of larger u "
+       'closer (docs/design.md section 1.1).',
        -MAX_TILT_DEG, MAX_TILT_DEG),
     _d('sensor.tolerance.axis_offset_x_mm', 0.02, 'mm',
        '1-sigma assembly tolerance of sensor.axis_offset_x_mm (info: the pixel sigma it '
