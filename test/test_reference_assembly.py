@@ -12,7 +12,7 @@ of each of 21 x 21 scene directions (reaching the whole sensor) meets optiland's
 placed with its x, y, rx, ry, rz (the generator checks optiland's rotation convention against
 the issue's definition, by hand).
 
-Asserted: ``mechdeconv_ros.model.assembly.project`` (the ``mechdeconv project`` contract)
+Asserted: ``mechdeconv_ros.model.projection.project_points`` (what ``mechdeconv project`` runs)
 within 0.01 px of optiland everywhere both trace, for every lens and pose; the sensor plane
 where optiland puts it; the poses move the pixels (the test would see a sign error); and,
 when optiland is installed, its convention check re-run live.
@@ -24,8 +24,8 @@ import importlib.util
 import json
 from pathlib import Path
 
-from mechdeconv_ros.model.assembly import project
 from mechdeconv_ros.model.model import build_model
+from mechdeconv_ros.model.projection import project_points as project
 from mechdeconv_ros.schema.params import load_params_file
 import numpy as np
 import pytest
