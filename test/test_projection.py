@@ -5,7 +5,7 @@ The one public projection (model/projection.py): round trips, the old results, t
 
 - Round trips: ``directions_of(pixels_of(d)) = d`` and ``pixels_of(directions_of(p)) = p``
   within 1e-6 px for a sensor offset alone, a tilted sensor, a tilted flat port and a
-  decentred dome. Before issue 37 an untilted sensor's inverse interpolated linearly (4e-3 px
+  decentred dome. Before issue 37 an untilted sensor's inverse interpolated linearly (1.5e-3 px
   off its own forward on the wide angle) and a non-symmetric port's inverse ignored the port's
   tilt (27 px off at the corner).
 - The old results: ``test/data/projection_regression.json`` is a REGRESSION reference written
