@@ -334,6 +334,50 @@ def test_lateral_colour_gives_each_channel_its_own_exact_map():
         assert np.abs(left[..., channel].astype(int) - want).max() <= 1
 
 
+def test_vignetting_gain_is_one_over_ri_where_each_ray_lands():
+    values = {**pair_of((480, 360)), 'output.vignetting_correction': True}
+    stereo = build_stereo(values)
+    rectifier = StereoRectifier(stereo)
+    assert rectifier.gains is not None
+    gain = rectifier.gains[0]
+    centre = gain[180, 240]
+    assert_allclose(centre, 1.0, atol=0.02)
+    assert gain[0, 0] > centre + 0.05          # the corner is darker: a larger gain
+    raw = np.full((360, 480), 100, np.uint8)
+    left, right = rectifier.rectify(raw, raw)
+    assert_allclose(left.astype(float), np.round(np.minimum(100.0 * gain, 255.0)), atol=1.0)
+    ri = stereo.left.illumination(with_fraction=False)
+    x, y = rectifier.left_x[0, 0], rectifier.left_y[0, 0]
+    rho = np.hypot((x - stereo.left.K[0, 2]) * stereo.left.pixel_mm[0],
+                   (y - stereo.left.K[1, 2]) * stereo.left.pixel_mm[1])
+    assert_allclose(gain[0, 0], 1.0 / ri.at(rho), rtol=1e-5)
+
+
+def test_two_different_cameras_share_the_rectified_pinhole():
+    """A right camera of another size and pitch: one K_rect, the left camera's size."""
+    values = {**pair_of((320, 240), rotation_y_deg=0.5), 'right.sensor.width_px': 400,
+              'right.sensor.height_px': 300, 'right.sensor.pixel_size_x_um': 3.5,
+              'right.sensor.pixel_size_y_um': 3.5}
+    stereo = build_stereo(values)
+    assert (stereo.width, stereo.height) == (320, 240)
+    assert (stereo.right.width, stereo.right.height) == (400, 300)
+    (lx, ly), (rx, ry) = stereo_maps(stereo)
+    assert rx.shape == lx.shape == (240, 320)
+    # alpha 0: every rectified pixel reads inside both raw images.
+    assert rx.min() >= -0.5 and rx.max() <= 399.5 and ry.min() >= -0.5 and ry.max() <= 299.5
+    # A scene direction lands on one rectified row in both images.
+    d_rect = np.array([[0.1, -0.05, 1.0], [-0.08, 0.07, 1.0]])
+    rect = d_rect @ stereo.K_rect.T
+    rect = rect[:, :2] / rect[:, 2:]
+    for model, rot, mx, my in ((stereo.left, stereo.R1, lx, ly),
+                               (stereo.right, stereo.R2, rx, ry)):
+        raw = pixels_of(model, d_rect @ rot)
+        got = np.column_stack([cv2.remap(m, rect[:, :1].astype(np.float32),
+                                         rect[:, 1:].astype(np.float32), cv2.INTER_LINEAR)
+                               .ravel() for m in (mx, my)])
+        assert_allclose(got, raw, atol=0.02)
+
+
 # --- the command line -----------------------------------------------------------------------
 
 @pytest.fixture(scope='module')
