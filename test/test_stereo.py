@@ -16,7 +16,8 @@ from mechdeconv_ros.imaging.stereo_remap import stereo_maps, StereoRectifier
 from mechdeconv_ros.model.model import ModelError
 from mechdeconv_ros.model.projection import directions_of, pixels_of
 from mechdeconv_ros.model.stereo import (
-    build_stereo, exact_directions, half_rotation, Rig, rig_rotation, stereo_camera_infos)
+    build_stereo, exact_directions, half_rotation, rectified_points, Rig, rig_rotation,
+    stereo_camera_infos)
 from mechdeconv_ros.optics.ports import entrance_pupil_z
 from mechdeconv_ros.schema.params import load_params_file, SCHEMA
 from mechdeconv_ros.schema.stereo_params import (
@@ -191,6 +192,29 @@ def test_camera_infos_follow_the_ros_stereo_contract(turned):
         assert_allclose(np.reshape(rect['P'], (3, 4)), proj)
 
 
+def test_opencv_rectifies_from_the_camera_infos_as_the_exact_maps(turned):
+    """
+    Run initUndistortRectifyMap(K, D, R, P), as image_proc does: the exact maps, nearly.
+
+    R's direction (rectified-from-camera) and P are OpenCV's; the only difference left is the
+    fitted D's (section 2.8).
+    """
+    infos = stereo_camera_infos(turned)
+    for side, (mx, my) in zip(('left', 'right'), stereo_maps(turned)):
+        info = infos[side]
+        cv_x, cv_y = cv2.initUndistortRectifyMap(
+            np.reshape(info['K'], (3, 3)), np.array(info['D']), np.reshape(info['R'], (3, 3)),
+            np.reshape(info['P'], (3, 4)), (turned.width, turned.height), cv2.CV_32FC1)
+        gap = np.hypot(cv_x - mx, cv_y - my)
+        assert gap.max() < 0.05, f'{side}: {gap.max():.3f} px'
+    # R transposed (the most common mistake) would be off by pixels.
+    wrong = cv2.initUndistortRectifyMap(
+        turned.left.K, np.array(turned.left.D), turned.R1.T, turned.P1,
+        (turned.width, turned.height), cv2.CV_32FC1)
+    (mx, my), _ = stereo_maps(turned)
+    assert np.hypot(wrong[0] - mx, wrong[1] - my).max() > 1.0
+
+
 def test_image_geometry_reads_the_baseline_and_depth_back(turned):
     """StereoCameraModel: baseline = -Tx_right / fx_right; Z = -Tx / (d - (cx_l - cx_r))."""
     infos = stereo_camera_infos(turned)
@@ -238,6 +262,17 @@ def test_maps_are_the_forward_trace_of_each_rectified_ray(turned):
         want = rect / np.linalg.norm(rect, axis=1, keepdims=True)
         assert_allclose(seen, want, atol=2e-6)
         assert_allclose(raw, pixels_of(model, rect @ rot), atol=1e-3)
+
+
+def test_rectified_points_invert_the_maps(turned):
+    rng = np.random.default_rng(0)
+    u = rng.integers(0, turned.width, 30)
+    v = rng.integers(0, turned.height, 30)
+    for side, (mx, my) in zip(('left', 'right'), stereo_maps(turned)):
+        raw = np.column_stack([mx[v, u], my[v, u]]).astype(np.float64)
+        # The maps are float32: 1e-4 px at these coordinates.
+        assert_allclose(rectified_points(turned, side, raw), np.column_stack([u, v]),
+                        atol=1e-3)
 
 
 def test_a_finite_scene_is_seen_from_the_entrance_pupil():
