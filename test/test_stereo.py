@@ -482,3 +482,13 @@ def test_cli_refuses_a_single_camera_params_file(cli_pair, capsys):
                  str(folder / 'l.png'), str(folder / 'r.png'), '-o', str(folder / 'bad')])
     assert code == 2
     assert "unknown parameter 'lens." in capsys.readouterr().err
+
+
+def test_design_section_8_lists_the_pairs_own_parameters():
+    """docs/design.md section 8's table has every rig.*, sync.* and stereo_check.* spec."""
+    text = (REPO / 'docs' / 'design.md').read_text(encoding='utf-8')
+    section = text.split('## 8. Stereo', 1)[1]
+    for spec in STEREO_SCHEMA:
+        if spec.name.startswith(('rig.', 'sync.', 'stereo_check.')):
+            assert f'| `{spec.name}` |' in section, spec.name
+            assert spec.description in section, spec.name
