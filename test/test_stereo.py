@@ -16,8 +16,8 @@ from mechdeconv_ros.imaging.stereo_remap import stereo_maps, StereoRectifier
 from mechdeconv_ros.model.model import ModelError
 from mechdeconv_ros.model.projection import directions_of, pixels_of
 from mechdeconv_ros.model.stereo import (
-    build_stereo, exact_directions, half_rotation, rectified_points, Rig, rig_rotation,
-    stereo_camera_infos)
+    build_stereo, exact_directions, half_rotation, rectified_points, rectifying_rotations, Rig,
+    rig_rotation, stereo_camera_infos)
 from mechdeconv_ros.optics.ports import entrance_pupil_z
 from mechdeconv_ros.schema.params import load_params_file, SCHEMA
 from mechdeconv_ros.schema.stereo_params import (
@@ -127,6 +127,21 @@ def test_half_rotation_squares_to_the_rotation():
     half = half_rotation(rot)
     assert_allclose(half @ half, rot, atol=1e-14)
     assert_allclose(half @ half.T, np.eye(3), atol=1e-14)
+
+
+@pytest.mark.parametrize('rig', [
+    Rig(120.0, 3.0, -2.0, 0.4, -1.5, 0.7), Rig(120.0, 0.0, 0.0, 0.0, 2.0, 0.0),
+    Rig(60.0, 10.0, 5.0, -3.0, 4.0, 2.0)], ids=['turned', 'toe-in', 'large'])
+def test_rotations_are_opencvs_stereo_rectify_of_the_rig(rig):
+    """OpenCV's extrinsics of the same rig: X_r = R_cv X_l + T_cv, R_cv = R^T, T_cv = -R^T t."""
+    k = np.array([[1000.0, 0.0, 320.0], [0.0, 1000.0, 240.0], [0.0, 0.0, 1.0]])
+    r1, r2, _, p2, _, _, _ = cv2.stereoRectify(
+        k, np.zeros(5), k, np.zeros(5), (640, 480), rig.R.T, -rig.R.T @ rig.t_mm,
+        flags=cv2.CALIB_ZERO_DISPARITY, alpha=-1)
+    ours = rectifying_rotations(rig)
+    assert_allclose(ours[0], r1, atol=1e-12)
+    assert_allclose(ours[1], r2, atol=1e-12)
+    assert_allclose(-p2[0, 3] / p2[0, 0], np.linalg.norm(rig.t_mm))
 
 
 def test_rectified_frames_share_an_orientation_with_the_baseline_along_x(turned):
