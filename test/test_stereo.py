@@ -133,7 +133,7 @@ def test_half_rotation_squares_to_the_rotation():
     Rig(120.0, 3.0, -2.0, 0.4, -1.5, 0.7), Rig(120.0, 0.0, 0.0, 0.0, 2.0, 0.0),
     Rig(60.0, 10.0, 5.0, -3.0, 4.0, 2.0)], ids=['turned', 'toe-in', 'large'])
 def test_rotations_are_opencvs_stereo_rectify_of_the_rig(rig):
-    """OpenCV's extrinsics of the same rig: X_r = R_cv X_l + T_cv, R_cv = R^T, T_cv = -R^T t."""
+    """Compare with OpenCV's extrinsics: X_r = R_cv X_l + T_cv, R_cv = R^T, T_cv = -R^T t."""
     k = np.array([[1000.0, 0.0, 320.0], [0.0, 1000.0, 240.0], [0.0, 0.0, 1.0]])
     r1, r2, _, p2, _, _, _ = cv2.stereoRectify(
         k, np.zeros(5), k, np.zeros(5), (640, 480), rig.R.T, -rig.R.T @ rig.t_mm,
