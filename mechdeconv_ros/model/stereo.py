@@ -3,7 +3,7 @@
 """
 A stereo pair without a checkerboard: two lens models, the rig, and the exact rectification.
 
-Frames (docs/design.md section "Stereo"): each camera's optical frame is REP-103's (X right,
+Frames (docs/design.md section 8): each camera's optical frame is REP-103's (X right,
 Y down, Z ahead), with its origin at the camera's paraxial entrance pupil. In the LEFT
 camera's frame the right camera's entrance pupil is at ``t = (baseline, offset_y, offset_z)``
 mm and its axes are the columns of
@@ -29,11 +29,16 @@ CameraInfo convention). A point at depth Z (rectified frame, m) has disparity
 ``u_l - u_r = f B / Z`` px.
 
 ``f`` and the principal point follow ``output.alpha`` over both cameras' raw outlines, seen
-through each camera's exact inverse (:func:`mechdeconv_ros.model.projection.directions_of`)
-(refined on the forward trace for a non-symmetric port, :func:`exact_directions`)
-and turned into the rectified frame: 0 frames the largest window inside both (only pixels
-valid in both images), 1 the smallest window holding all of both; in between, f and the
-window's centre interpolate linearly (as the single camera's ``output.alpha``).
+through each camera's exact inverse (:func:`mechdeconv_ros.model.projection.directions_of`,
+refined on the forward trace for a non-symmetric port, :func:`exact_directions`) and turned
+into the rectified frame: 0 frames the largest window inside both (only pixels valid in both
+images), 1 the smallest window holding all of both; in between, f and the window's centre
+interpolate linearly (as the single camera's ``output.alpha``). Where a fisheye's image
+circle, or 85 deg from the rectified axis (the pinhole limit), ends inside a raw image, its
+outline follows that edge.
+
+A finite ``scene.distance_mm`` (the single camera measures that plane from its front principal
+point H) is converted to the pair's origin E by :func:`pupil_tangent_scale`.
 """
 
 from __future__ import annotations
