@@ -206,17 +206,22 @@ def _real_lens_row(real: Mapping[str, Any]) -> list[str]:
         return ', '.join(f'{v} {got.count(v)}' for v in ('better', 'tie', 'undecided', 'worse')
                          if got.count(v))
 
-    exceptions = [f"{lens['name']}: {lens['verdicts']['textbook']['frame']}, "
+    exceptions = [f"{_short(lens['name'])} {lens['verdicts']['textbook']['frame']}, "
                   f"{lens['ours']['frame']['max_pct']:.2f} vs "
                   f"{lens['textbook']['frame']['max_pct']:.2f} %"
                   for lens in lenses if lens['verdicts']['textbook']['frame'] != 'better']
     return [f'[{len(names)} production lenses](docs/real_lenses.md) ({len(lenses)} positions) '
-            'traced from their patents vs their lensfun calibrations, nothing fitted: '
-            'largest error, each against its own baselines',
+            'from their patents vs lensfun, nothing fitted; largest error, each lens against '
+            'its own baselines',
             f"vs its textbook model: central {counts('textbook', 'central')}; frame "
             f"{counts('textbook', 'frame')} ({'; '.join(exceptions)})",
             f"vs a k1 fit to lensfun: central {counts('k1_fit', 'central')}; frame "
             f"{counts('k1_fit', 'frame')}", 'real_lenses.json']
+
+
+def _short(name: str) -> str:
+    """Return a lens name without its aperture ('Canon EF 35 mm f/2' -> 'Canon EF 35 mm')."""
+    return re.split(r' [fF]/?\d', name)[0]
 
 
 def readme_block(docs: Mapping[str, Mapping[str, Any]]) -> str:
