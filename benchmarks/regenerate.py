@@ -191,23 +191,37 @@ def readme_rows(docs: Mapping[str, Mapping[str, Any]]) -> list[list[str]]:
 
 
 def _real_lens_row(real: Mapping[str, Any]) -> list[str]:
-    """Return the README row of the real-lens check: ours and the textbook projection."""
+    """
+    Return the README row of the real-lens check: each lens against its own baselines.
+
+    Like with like: the verdicts of :func:`benchmarks.real_lenses.verdicts` per lens against
+    that lens's textbook model and k1 fit, counted, with every lens the trace is not better
+    for over the frame named with both numbers.
+    """
     lenses = real['lenses']
-
-    def span(kind: str, field: str) -> tuple[float, float]:
-        values = [lens[kind][field]['max_pct'] for lens in lenses]
-        return min(values), max(values)
-
     names = {lens['patent'] for lens in lenses}
-    c_lo, c_hi = span('ours', 'central')
-    f_lo, f_hi = span('ours', 'frame')
-    t_lo, t_hi = span('textbook', 'central')
+
+    def counts(baseline: str, field: str) -> str:
+        got = [lens['verdicts'][baseline][field] for lens in lenses]
+        return ', '.join(f'{v} {got.count(v)}' for v in ('better', 'tie', 'undecided', 'worse')
+                         if got.count(v))
+
+    exceptions = [f"{_short(lens['name'])} {lens['verdicts']['textbook']['frame']}, "
+                  f"{lens['ours']['frame']['max_pct']:.2f} vs "
+                  f"{lens['textbook']['frame']['max_pct']:.2f} %"
+                  for lens in lenses if lens['verdicts']['textbook']['frame'] != 'better']
     return [f'[{len(names)} production lenses](docs/real_lenses.md) ({len(lenses)} positions) '
-            'traced from their patents vs their lensfun calibrations, nothing fitted',
-            f'largest {c_lo:.2f}-{c_hi:.2f} % of H centrally, {f_lo:.1f}-{f_hi:.1f} % '
-            'over the frame',
-            f'nominal pinhole/equisolid {t_lo:.2f}-{t_hi:.1f} % centrally, '
-            f"{span('textbook', 'frame')[1]:.0f} % over the frame", 'real_lenses.json']
+            'from their patents vs lensfun, nothing fitted; largest error, each lens against '
+            'its own baselines',
+            f"vs its textbook model: central {counts('textbook', 'central')}; frame "
+            f"{counts('textbook', 'frame')} ({'; '.join(exceptions)})",
+            f"vs a k1 fit to lensfun: central {counts('k1_fit', 'central')}; frame "
+            f"{counts('k1_fit', 'frame')}", 'real_lenses.json']
+
+
+def _short(name: str) -> str:
+    """Return a lens name without its aperture ('Canon EF 35 mm f/2' -> 'Canon EF 35 mm')."""
+    return re.split(r' [fF]/?\d', name)[0]
 
 
 def readme_block(docs: Mapping[str, Mapping[str, Any]]) -> str:

@@ -3,9 +3,10 @@
 """
 Regenerate the parameters tables from the schema (mechdeconv_ros.schema.params.SCHEMA).
 
-README.md holds one row per parameter with the first clause of its description, between the
+README.md holds the main parameters (:data:`MAIN`: what a new user sets first), one row each
+with the first clause of its description (a group of related ones in one row), between the
 lines ``<!-- params:start -->`` and ``<!-- params:end -->`` (the rest of the README is left
-alone); docs/parameters.md holds the whole descriptions. Usage::
+alone); docs/parameters.md holds every parameter with its whole description. Usage::
 
     python tools/gen_readme_params.py           # rewrite both in place
     python tools/gen_readme_params.py --check   # exit 1 if either is out of date
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+import re
 import sys
 from typing import Sequence
 
@@ -29,24 +31,39 @@ from mechdeconv_ros.schema.params import (  # noqa: E402 - after the sys.path fi
 
 START = '<!-- params:start -->'
 END = '<!-- params:end -->'
-#: The even asphere terms share one row of the README's table (docs/parameters.md lists each).
+#: The even asphere terms (docs/parameters.md lists each).
 ASPHERE_FOLDED = tuple(f'lens.surfaces.asphere_a{p}' for p in ASPHERE_POWERS)
 #: Groups that share one README row, by name prefix: (row label, description). The README has a
 #: size limit; docs/parameters.md lists each member with its whole description.
 FOLDED_GROUPS = {
+    'lens.surfaces.': ('lens.surfaces.*',
+                       'Prescription mode: radius, thickness, index or glass, semi-diameter, '
+                       'conic, asphere terms of each surface (stop: lens.stop_surface).'),
+    'port.': ('port.*', 'A flat or dome window in front of the lens.'),
+    'sensor.pixel_size_': ('sensor.pixel_size_*', 'Pixel pitch along the rows (x) and the '
+                                                  'columns (y), um.'),
+    'sensor.axis_offset_': ('sensor.axis_offset_*', 'Where the lens axis meets the sensor, from '
+                                                    'its centre (x, y), mm.'),
     'lens.tolerance.': ('lens.tolerance.*',
                         '1-sigma manufacturing tolerances of r1, r2, t, n and d_a.'),
     'lens.datasheet.': ('lens.datasheet.*',
-                        'Datasheet mode: field_angle_deg and image_height_mm tables (same '
-                        'length), optional relative_illumination.'),
+                        'Datasheet mode: image height by field angle, tabled.'),
     'lens.zoom.': ('lens.zoom.*',
-                   'Moving zoom group: joint (in lens_state; empty = off), positions, the air '
-                   'gaps it moves (surfaces) and their thickness_mm at each position.'),
+                   'Moving zoom group: its lens_state joint, positions and the gaps it moves.'),
     'lens.focus.': ('lens.focus.*', 'The same for a moving focus group.'),
     'image_rect.compressed.': ('image_rect.compressed.*',
                                'image_rect/compressed: format (jpeg, png), jpeg_quality, '
                                'png_level; only while subscribed.'),
 }
+#: The README's rows, in order: schema names, or a group's label (a key's label above). Every
+#: other parameter is in docs/parameters.md.
+MAIN = (
+    'lens.focal_length_mm', 'lens.r1_mm', 'lens.r2_mm', 'lens.thickness_mm',
+    'lens.refractive_index', 'lens.aperture_diameter_mm', 'lens.stop_offset_mm',
+    'lens.surfaces.*', 'lens.datasheet.*', 'lens.zoom.*', 'sensor.pixel_size_*',
+    'sensor.width_px', 'sensor.height_px', 'sensor.axis_offset_*', 'sensor.tilt_x_deg',
+    'sensor.tilt_y_deg', 'scene.distance_mm', 'scene.medium', 'port.*', 'output.projection',
+    'output.alpha', 'output.vignetting_correction', 'check.rate_hz')
 #: The generated page with the whole descriptions.
 PARAMETERS_PAGE = REPO / 'docs' / 'parameters.md'
 
@@ -107,6 +124,8 @@ def short_description(spec: ParamSpec) -> str:
     """
     Return the first clause of a description (up to its first '.', ';' or ':').
 
+    Parenthesised asides are left out (the README's size limit; docs/parameters.md has them).
+
     :param spec: the parameter's spec.
     :return: the clause, with ``Read-only.`` for read-only parameters.
     """
@@ -120,50 +139,47 @@ def short_description(spec: ParamSpec) -> str:
                 not text[:i].endswith(('eq', 'e.g', 'i.e')):
             cut = i
             break
-    text = text[:cut] + '.'
+    text = re.sub(r' \([^()]*\)', '', text[:cut]) + '.'
     return text + (' Read-only.' if spec.read_only else '')
 
 
 def params_table(full: bool = False) -> str:
     """
-    Return the Markdown table of every schema parameter, in schema order.
+    Return a Markdown table of the schema parameters.
 
-    :param full: whole descriptions (docs/parameters.md) instead of their first clause (the
-        README).
-    :return: the table, one row per parameter, without a trailing newline.
+    :param full: every parameter in schema order with its whole description
+        (docs/parameters.md), instead of the README's :data:`MAIN` rows with the first clause.
+    :return: the table, without a trailing newline.
+    :raises KeyError: naming a :data:`MAIN` entry that is neither a parameter nor a group.
     """
     if full:
         rows = ['| name | type | default | range | unit | description |',
                 '| --- | --- | --- | --- | --- | --- |']
-    else:       # the README's: the type shows in the default (4.0, 0, [], 'raw', true)
-        rows = ['| name | default | range | description |', '| --- | --- | --- | --- |']
-    for spec in SCHEMA:
-        unit = {'': '-', '1': '1'}.get(spec.unit, spec.unit)
-        if full:
+        for spec in SCHEMA:
+            unit = {'': '-', '1': '1'}.get(spec.unit, spec.unit)
             cells: tuple[str, ...] = (
                 f'`{spec.name}`', spec.type.replace('_', ' '), f'`{format_default(spec)}`',
                 format_range(spec), unit,
                 spec.description + (' Read-only.' if spec.read_only else ''))
-        else:
-            if spec.name in ASPHERE_FOLDED[1:]:
-                continue    # one README row for the asphere terms (the README's size limit)
-            group = _group(spec.name)
-            if group is not None:
-                if spec.name != _members(group)[0]:
-                    continue
-                label, text = FOLDED_GROUPS[group]
-                rows.append(f'| `{label}` | - | - | {text} |')
-                continue
-            span = format_range(spec)
-            if unit not in ('-', '1') and span != '-':
-                span += f' {unit}'
-            name, text = f'`{spec.name}`', short_description(spec)
-            if spec.name == ASPHERE_FOLDED[0]:
-                name = f'`{spec.name}` ... `_a{ASPHERE_POWERS[-1]}`'
-                span = format_range(spec)
-                text = (f'Prescription mode: even asphere terms a4 r^4 ... '
-                        f'a{ASPHERE_POWERS[-1]} r^{ASPHERE_POWERS[-1]} of each surface.')
-            cells = (name, f'`{format_default(spec)}`', span, text)
+            rows.append('| ' + ' | '.join(_cell(c) for c in cells) + ' |')
+        return '\n'.join(rows)
+    # The README's: the type shows in the default (4.0, 0, [], 'raw', true).
+    rows = ['| name | default | range | description |', '| --- | --- | --- | --- |']
+    specs = {spec.name: spec for spec in SCHEMA}
+    labels = dict(FOLDED_GROUPS.values())
+    for name in MAIN:
+        if name in labels:
+            rows.append(f'| `{name}` | - | - | {labels[name]} |')
+            continue
+        if name not in specs:
+            raise KeyError(f'{name}: in MAIN of tools/gen_readme_params.py but not a schema '
+                           'parameter or group: update MAIN')
+        spec = specs[name]
+        unit = {'': '-', '1': '1'}.get(spec.unit, spec.unit)
+        span = format_range(spec)
+        if unit not in ('-', '1') and span != '-':
+            span += f' {unit}'
+        cells = (f'`{spec.name}`', f'`{format_default(spec)}`', span, short_description(spec))
         rows.append('| ' + ' | '.join(_cell(c) for c in cells) + ' |')
     return '\n'.join(rows)
 
@@ -182,15 +198,20 @@ def readme_row_names() -> list[str]:
     """
     Return the name of each row of the README's table, in order.
 
-    :return: schema names, with one label per folded group and one row for the asphere terms.
+    :return: :data:`MAIN`: schema names and group labels.
     """
-    names = []
-    for spec in SCHEMA:
-        group = _group(spec.name)
-        if spec.name in ASPHERE_FOLDED[1:] or (group and spec.name != _members(group)[0]):
-            continue
-        names.append(FOLDED_GROUPS[group][0] if group else spec.name)
-    return names
+    return list(MAIN)
+
+
+def group_members(label: str) -> list[str]:
+    """
+    Return the schema names a README row stands for.
+
+    :param label: a row name (a schema name or a group's label).
+    :return: the names (one for a plain parameter).
+    """
+    prefix = next((p for p, (name, _) in FOLDED_GROUPS.items() if name == label), None)
+    return [label] if prefix is None else _members(prefix)
 
 
 def parameters_page() -> str:
@@ -203,7 +224,7 @@ def parameters_page() -> str:
             '<!-- Generated from mechdeconv_ros/schema/params.py by '
             'python tools/gen_readme_params.py: do not edit. -->\n'
             'Every parameter with its whole description, as `ros2 param describe` shows it '
-            "(the README lists the first clause). Defaults are the paper's Case 2.\n\n"
+            "(the README lists the main ones). Defaults are the paper's Case 2.\n\n"
             + params_table(full=True) + '\n')
 
 

@@ -15,7 +15,19 @@ traced field (docs/design.md section 2.8), with ``r_u = tan(theta)`` and ``r_d =
 Each is fitted by least squares refined towards the minimax (Lawson's reweighting), then
 measured by its LARGEST displacement over the raw image (where a consumer's rectification map
 puts each raw pixel against the trace); the first in that order within 0.05 px is published,
-else the one with the smallest error. Pinhole models cannot describe a field of 90 deg or more.
+else the one with the smallest error (and a warning says so: ``info``, ``/diagnostics``).
+Pinhole models cannot describe a field of 90 deg or more.
+
+The domain is what a consumer can undistort: every field angle a raw pixel sees, up to the
+farthest corner, the end of the traced field or 90 deg. Past 90 deg no consumer of
+camera_info has a direction (OpenCV and image_geometry work in ``x/z, y/z``; the
+equidistant model's ``cv2.fisheye.undistortPoints`` returns the mirrored direction there):
+the share of the raw image that lies there is reported (``beyond_fraction``); image_rect in
+the equidistant projection shows it. With the axis on the sensor the raw image holds every
+radius up to its farthest corner, so the largest error over the raw image is the largest
+``|r_model(theta) - r_traced(theta)| max(f_x, f_y)`` over that range of angles: measured on
+MEASURE_SAMPLES of them against the trace's cubic Hermite interpolant (the projection's), it
+is what OpenCV on K, D is off by (``test/test_camera_info_consumers.py``).
 """
 
 from __future__ import annotations
@@ -25,7 +37,7 @@ import functools
 import math
 
 from mechdeconv_ros.lenses.lens_errors import FloatArray
-from mechdeconv_ros.model.radial_map import RadialMap
+from mechdeconv_ros.model.radial_map import hermite, RadialMap
 import numpy as np
 
 
@@ -38,7 +50,14 @@ EQUIVALENT_MAX_ERROR_PX = 0.05
 EQUIVALENT_MODELS = ('plumb_bob', 'rational_polynomial', 'equidistant')
 #: Samples of the fit and reweighting passes of the minimax (Lawson) refinement.
 FIT_SAMPLES = 256
-LAWSON_PASSES = 12
+LAWSON_PASSES = 40
+#: Field angles the largest error is measured on (uniform over the domain).
+MEASURE_SAMPLES = 2048
+#: No consumer of camera_info has a direction at or past this field angle (deg): OpenCV's
+#: models, cv2.fisheye included, and image_geometry take and give x/z, y/z, which cannot
+#: tell 90 + a deg from 90 - a deg (cv2.fisheye.undistortPoints returns the mirrored
+#: direction there).
+CONSUMER_LIMIT_DEG = 90.0
 
 
 @dataclass(frozen=True)
@@ -49,6 +68,12 @@ class EquivalentFit:
     D: tuple[float, ...]
     max_error_px: float
     rms_error_px: float
+    #: The field angle (deg) up to which it is fitted and measured (:func:`consumer_reach_rad`).
+    reach_deg: float = math.nan
+    #: The share of the raw image's traced pixels past :data:`CONSUMER_LIMIT_DEG`, where no
+    #: consumer of camera_info has a direction (a corner of a wide angle; image_rect in the
+    #: equidistant projection shows them).
+    beyond_fraction: float = 0.0
 
 
 def equivalent_radius(distortion_model: str, D: tuple[float, ...] | FloatArray,
@@ -101,17 +126,46 @@ def raw_probe_points(width: int, height: int) -> FloatArray:
     return np.concatenate([boundary_points(width, height), grid])
 
 
+def consumer_reach_rad(field: RadialMap, v: float, K: FloatArray, width: int,
+                       height: int) -> float:
+    """
+    Return the largest field angle a camera_info consumer undistorts on this raw image (rad).
+
+    That is the raw image's farthest corner from the principal point (the traced axis, on the
+    sensor), the end of the traced field, or :data:`CONSUMER_LIMIT_DEG`, whichever is least:
+    every field angle from 0 to it is seen by some raw pixel.
+
+    :param field: the field traced by angle.
+    :param v: image distance, mm.
+    :param K: raw camera matrix.
+    :param width: raw width, px.
+    :param height: raw height, px.
+    :return: the reach, rad.
+    """
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    corners = np.array([[-0.5, -0.5], [width - 0.5, -0.5], [-0.5, height - 0.5],
+                        [width - 0.5, height - 0.5]])
+    rn = float(np.max(np.hypot((corners[:, 0] - cx) / fx, (corners[:, 1] - cy) / fy)))
+    corner = float(field.angle_from_real(np.array(rn * v)))
+    end = field.max_field_angle_rad
+    return min(corner if math.isfinite(corner) else end, end, math.radians(CONSUMER_LIMIT_DEG))
+
+
 def fit_equivalent(field: RadialMap, v: float, K: FloatArray, width: int, height: int,
                    every: bool = False) -> list[EquivalentFit]:
     """
     Fit every consumer model to the traced field and measure it over the raw image.
 
-    The fit is least squares in pixels on FIT_SAMPLES field angles up to the raw image corner
-    (or the end of the field), refined towards the minimax by Lawson's reweighting; the error
-    of a model at a raw pixel is the distance (px) between that pixel and where the model
-    projects the pixel's true (traced) direction, which is what a consumer's rectification map
-    (cv2.initUndistortRectifyMap, cv2.fisheye.initUndistortRectifyMap) is off by there.
-    Raw pixels outside the image circle carry no direction and are skipped.
+    The domain is every field angle a raw pixel sees that a consumer can undistort: 0 to
+    :func:`consumer_reach_rad` (with the axis on the sensor the raw image holds every radius
+    up to its farthest corner). The fit is least squares in pixels on FIT_SAMPLES field angles
+    of it, refined towards the minimax by Lawson's reweighting. The error of a model is
+    ``|r_model(theta) - r_traced(theta)|`` times the larger focal length (px), its largest over
+    MEASURE_SAMPLES angles of the domain: where a consumer's rectification map
+    (cv2.initUndistortRectifyMap, cv2.fisheye.initUndistortRectifyMap) puts a raw pixel against
+    the trace (the traced height is the cubic Hermite interpolant the projection uses). The RMS
+    is over the raw probe pixels. Raw pixels outside the image circle carry no direction; those
+    past 90 deg none a consumer can use (``beyond_fraction``).
 
     :param field: the field traced by angle (``LensModel.field_curve``).
     :param v: image distance, mm (normalised radius = real / v).
@@ -127,14 +181,19 @@ def fit_equivalent(field: RadialMap, v: float, K: FloatArray, width: int, height
     xn, yn = (points[:, 0] - cx) / fx, (points[:, 1] - cy) / fy
     rn = np.hypot(xn, yn)
     theta_p = field.angle_from_real(rn * v)
-    inside = np.isfinite(theta_p)
+    seen = np.isfinite(theta_p)
+    beyond = float(np.mean(theta_p[seen] >= math.radians(CONSUMER_LIMIT_DEG))) if seen.any() \
+        else 0.0
+    inside = seen & (theta_p < math.radians(CONSUMER_LIMIT_DEG))
     xn, yn, rn, theta_p = xn[inside], yn[inside], rn[inside], theta_p[inside]
     # Pixels per unit of normalised radius along each probe's direction.
     with np.errstate(invalid='ignore', divide='ignore'):
         gain = np.where(rn > 0, np.hypot(xn * fx, yn * fy) / rn, max(fx, fy))
-    limit = float(np.max(theta_p)) if theta_p.size else 0.0
-    theta = np.linspace(0.0, limit, FIT_SAMPLES + 1)[1:]
-    target = np.interp(theta, field.field_angle_rad, field.real_mm) / v
+    reach = consumer_reach_rad(field, v, K, width, height)
+    theta = np.linspace(0.0, reach, FIT_SAMPLES + 1)[1:]
+    target = _traced(field, theta) / v
+    measure = np.linspace(0.0, reach, MEASURE_SAMPLES + 1)[1:]
+    measure_target = _traced(field, measure) / v
     scale = max(fx, fy)
     fits: list[EquivalentFit] = []
     for name in EQUIVALENT_MODELS:
@@ -146,14 +205,24 @@ def fit_equivalent(field: RadialMap, v: float, K: FloatArray, width: int, height
             # A degenerate rational fit (small fields): plumb_bob is its special case.
             coefficients = fits[0].D + (0.0, 0.0, 0.0)
         if coefficients is None:
-            fits.append(EquivalentFit(name, _zero_d(name), math.inf, math.inf))
+            fits.append(EquivalentFit(name, _zero_d(name), math.inf, math.inf,
+                                      math.degrees(reach), beyond))
             continue
-        error = np.abs(equivalent_radius(name, coefficients, theta_p) - rn) * gain
-        error = np.where(np.isfinite(error), error, np.inf)
-        worst = float(np.max(error)) if error.size else 0.0
+        curve = np.abs(equivalent_radius(name, coefficients, measure) - measure_target) * scale
+        worst = float(np.max(curve)) if curve.size else 0.0
+        # The RMS over the probe pixels: the error curve at their angles, along their azimuth.
+        error = np.interp(theta_p, measure, curve) * gain / scale
         rms = float(np.sqrt(np.mean(error * error))) if error.size else 0.0
-        fits.append(EquivalentFit(name, coefficients, worst, rms))
+        fits.append(EquivalentFit(name, coefficients, worst if math.isfinite(worst) else math.inf,
+                                  rms, math.degrees(reach), beyond))
     return fits
+
+
+def _traced(field: RadialMap, theta: FloatArray) -> FloatArray:
+    """Return the traced real height (mm) at field angles within the field (cubic Hermite)."""
+    if field.field_angle_rad.size < 5:
+        return np.interp(theta, field.field_angle_rad, field.real_mm)
+    return hermite(field.field_angle_rad, field.real_mm, theta)
 
 
 def _zero_d(name: str) -> tuple[float, ...]:
@@ -256,3 +325,20 @@ def choose_equivalent(fits: list[EquivalentFit]) -> EquivalentFit:
         if fit.max_error_px <= EQUIVALENT_MAX_ERROR_PX:
             return fit
     return min(fits, key=lambda fit: fit.max_error_px)
+
+
+def bound_warning(chosen: EquivalentFit, parameter: str, what: str) -> list[str]:
+    """
+    Return the warning for a published fit over EQUIVALENT_MAX_ERROR_PX (none within it).
+
+    :param chosen: the published fit.
+    :param parameter: the parameters the warning names (the lens, or the sensor's tilt).
+    :param what: what no model represents ("this lens", "this tilt").
+    :return: ``[]`` or one warning (``info``, ``/diagnostics`` WARN).
+    """
+    if chosen.max_error_px <= EQUIVALENT_MAX_ERROR_PX:
+        return []
+    return [f'{parameter}: no ROS distortion model represents {what} within '
+            f'{EQUIVALENT_MAX_ERROR_PX:g} px over the raw image (to {chosen.reach_deg:.1f} deg): '
+            f'camera_info carries the best fit, {chosen.distortion_model}, off by up to '
+            f'{chosen.max_error_px:.3g} px (image_rect is exact)']

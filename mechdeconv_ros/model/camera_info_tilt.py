@@ -16,10 +16,11 @@ probe points themselves (K fixed: principal point at the traced axis), in pixels
 - equidistant (cv2.fisheye): radial only (``x_d = theta_d x / r``), no tangential terms:
   fitted only where the pinhole models cannot be (a field of 89 deg or more).
 
-Each is refined towards the minimax by Lawson's reweighting and measured, as the radial
-models, by its largest displacement (px) over the probe points. A tilt's keystone (a
-projective term) is in none of them: a tilt they miss by more than 0.05 px is published with
-the best fit and its error (the model's warnings, ``info`` and ``/diagnostics``).
+Each is refined towards the minimax by Lawson's reweighting and measured by its largest
+displacement (px) over the probe points under 90 deg (past it no consumer has a direction).
+A tilt's keystone (a projective term) is in none of them: a tilt they miss by more than
+0.05 px is published with the best fit and its error (the model's warnings, ``info`` and
+``/diagnostics``).
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ import math
 
 from mechdeconv_ros.lenses.lens_errors import FloatArray
 from mechdeconv_ros.model.camera_info_fit import (
-    EQUIVALENT_MAX_ERROR_PX, EQUIVALENT_MODELS, EquivalentFit)
+    CONSUMER_LIMIT_DEG, EQUIVALENT_MAX_ERROR_PX, EQUIVALENT_MODELS, EquivalentFit)
 import numpy as np
 
 #: Reweighting passes of the minimax refinement (a tilt's keystone stays: the fit's error
@@ -53,8 +54,12 @@ def fit_tilted(theta: FloatArray, phi: FloatArray, u: FloatArray, v: FloatArray,
     :param every: fit every model (default: stop at the first within 0.05 px).
     :return: fits in :data:`EQUIVALENT_MODELS` order.
     """
-    keep = np.isfinite(theta) & np.isfinite(phi)
+    seen = np.isfinite(theta) & np.isfinite(phi)
+    # Past 90 deg no consumer has a direction (camera_info_fit.CONSUMER_LIMIT_DEG).
+    keep = seen & (theta < math.radians(CONSUMER_LIMIT_DEG))
+    beyond = 1.0 - float(np.mean(keep[seen])) if seen.any() else 0.0
     theta, phi, u, v = theta[keep], phi[keep], u[keep], v[keep]
+    reach = math.degrees(float(np.max(theta))) if theta.size else 0.0
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
     fits: list[EquivalentFit] = []
     for name in EQUIVALENT_MODELS:
@@ -64,7 +69,7 @@ def fit_tilted(theta: FloatArray, phi: FloatArray, u: FloatArray, v: FloatArray,
                 and any(math.isfinite(f.max_error_px) for f in fits)):
             break       # radial only: it cannot beat a pinhole model's tangential terms
         if name != 'equidistant' and not (theta.size and theta.max() < math.radians(89.0)):
-            fits.append(EquivalentFit(name, _zero(name), math.inf, math.inf))
+            fits.append(EquivalentFit(name, _zero(name), math.inf, math.inf, reach, beyond))
             continue
         # Fitted on at most FIT_POINTS of the probes (spread evenly), measured on all.
         pick = np.unique(np.linspace(0, theta.size - 1, min(theta.size, FIT_POINTS))
@@ -75,7 +80,7 @@ def fit_tilted(theta: FloatArray, phi: FloatArray, u: FloatArray, v: FloatArray,
         error = np.hypot(pu - u, pv - v)
         error = np.where(np.isfinite(error), error, np.inf)
         fits.append(EquivalentFit(name, coefficients, float(np.max(error)),
-                                  float(np.sqrt(np.mean(error * error)))))
+                                  float(np.sqrt(np.mean(error * error))), reach, beyond))
     return fits
 
 

@@ -59,8 +59,8 @@ from mechdeconv_ros.lenses.sources import source_for
 from mechdeconv_ros.model import lateral_color, underwater
 from mechdeconv_ros.model.assembly import check_pose
 from mechdeconv_ros.model.camera_info_fit import (
-    boundary_points, choose_equivalent, EQUIVALENT_MAX_ERROR_PX, EquivalentFit, fit_equivalent,
-    raw_probe_points)
+    bound_warning, boundary_points, choose_equivalent, EQUIVALENT_MAX_ERROR_PX, EquivalentFit,
+    fit_equivalent, raw_probe_points)
 from mechdeconv_ros.model.camera_info_tilt import fit_tilted
 from mechdeconv_ros.model.lateral_color import LateralColor
 from mechdeconv_ros.model.projection import raw_from_normalised, unproject_angles
@@ -121,6 +121,11 @@ class LensModel:
                                                           compare=False)
     _lateral_cache: dict[str, LateralColor] = field(default_factory=dict, repr=False,
                                                     compare=False)
+
+    def _published_fit(self) -> EquivalentFit:
+        """Return the fit camera_info carries (one of ``equivalent_fits``)."""
+        return next(fit for fit in self.equivalent_fits
+                    if fit.distortion_model == self.distortion_model)
 
     def lateral_color(self) -> LateralColor:
         """
@@ -246,6 +251,10 @@ class LensModel:
             'K_new': self.K_new.round(10).tolist(), 'P': self.P.round(10).tolist(),
             'fit_rms_px': self.fit_rms_px,
             'equivalent_max_error_px': self.equivalent_max_error_px,
+            # The field angle D is fitted and measured to, and the share of the raw image past
+            # 90 deg, where no camera_info consumer has a direction (camera_info_fit.py).
+            'equivalent_reach_deg': self._published_fit().reach_deg,
+            'equivalent_beyond_90deg_fraction': self._published_fit().beyond_fraction,
             'equivalent_models': {fit.distortion_model: {'max_error_px': fit.max_error_px,
                                                          'rms_error_px': fit.rms_error_px}
                                   for fit in self.equivalent_fits},
@@ -484,21 +493,19 @@ def _equivalent(camera: Any, v: float, w: int, h: int,
     """
     Fit camera_info's models: radially (section 2.8), or in 2-D for a tilted sensor.
 
-    A tilt no model represents within EQUIVALENT_MAX_ERROR_PX adds a warning (``info``,
-    ``/diagnostics``): the best fit is published with its error.
+    A lens or tilt no model represents within EQUIVALENT_MAX_ERROR_PX adds a warning
+    (``info``, ``/diagnostics``): the best fit is published with its error.
     """
     if not SensorPose.from_values(camera.values).tilted:
         fits = fit_equivalent(camera.field_curve, v, camera.K, w, h)
-        return fits, choose_equivalent(fits)
+        chosen = choose_equivalent(fits)
+        warnings += bound_warning(chosen, 'camera_info', 'this lens')
+        return fits, chosen
     # No rotational symmetry: the consumer models in two dimensions, with their tangential
     # terms, on the traced directions of the probe pixels (model/camera_info_tilt.py).
     probe = raw_probe_points(w, h)
     theta, phi = unproject_angles(camera, probe[:, 0], probe[:, 1])
     fits = fit_tilted(theta, phi, probe[:, 0], probe[:, 1], camera.K)
     chosen = choose_equivalent(fits)
-    if chosen.max_error_px > EQUIVALENT_MAX_ERROR_PX:
-        warnings.append(f'sensor.tilt_x_deg/tilt_y_deg: no ROS distortion model represents '
-                        f'this tilt within {EQUIVALENT_MAX_ERROR_PX:g} px: camera_info carries '
-                        f'the best fit, {chosen.distortion_model}, off by up to '
-                        f'{chosen.max_error_px:.3g} px (image_rect is exact)')
+    warnings += bound_warning(chosen, 'sensor.tilt_x_deg/tilt_y_deg', 'this tilt')
     return fits, chosen

@@ -306,7 +306,9 @@ def fill_camera_info(info: CameraInfo, model: LensModel, *, rectified: bool) -> 
 
     ``rectified=False`` gives the calibration-free replacement of a calibrated camera's
     ``camera_info``: the raw image size, ``K`` and ``D`` of the raw (distorted) camera with
-    ``D`` the equivalent plumb_bob / rational_polynomial coefficients, ``R`` identity and
+    ``D`` the equivalent plumb_bob / rational_polynomial / equidistant coefficients
+    (:mod:`mechdeconv_ros.model.camera_info_fit`: within 0.05 px, else the best fit, warned),
+    ``R`` identity and
     ``P = [K_new | 0]``. ``rectified=True`` describes the corrected image itself: the output
     size, ``K = K_new``, ``D`` all zero (plumb_bob; ``equidistant`` with four zeros when
     ``output.projection`` is equidistant: the corrected image is then an ideal fisheye,

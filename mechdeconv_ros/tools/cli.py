@@ -180,8 +180,9 @@ def format_report(report: dict[str, Any]) -> str:
         f"corner sigma {num(report['corner_sigma_px'], '.3g')} px",
         f"equivalent calibration: {report['distortion_model']} D = "
         f"[{', '.join(f'{d:.6g}' for d in report['D'])}] (max error "
-        f"{_px(report['equivalent_max_error_px'])} over the raw image, RMS "
-        f"{_px(report['fit_rms_px'])})",
+        f"{_px(report['equivalent_max_error_px'])} over the raw image to "
+        f"{report['equivalent_reach_deg']:.1f} deg, RMS {_px(report['fit_rms_px'])})"
+        + _beyond_90(report['equivalent_beyond_90deg_fraction']),
         _field_line(report),
     ]
     lines += _glass_and_sensor_lines(report)
@@ -260,13 +261,25 @@ def _field_line(report: dict[str, Any]) -> str:
             f"{deg(field['output_corner_field_angle_deg'])}")
 
 
+def _beyond_90(fraction: float) -> str:
+    """Say how much of the raw image no camera_info consumer can undistort (past 90 deg)."""
+    if not fraction > 0.0:
+        return ''
+    return (f'; {100.0 * fraction:.1f} % of the raw image lies past 90 deg, where no '
+            'camera_info consumer has a direction (image_rect with output.projection '
+            'equidistant shows it)')
+
+
 def cmd_camera_info(args: argparse.Namespace) -> int:
     """Print the camera_calibration_parsers YAML of the raw camera."""
     model = _model(args)
+    report = model.report()
     # A YAML comment: camera_calibration_parsers ignores it, a person reads it.
     sys.stdout.write(f'# equivalent calibration {model.distortion_model}: largest displacement '
-                     f'{model.equivalent_max_error_px:.3g} px over the raw image (what a '
-                     'consumer rectifying with it is off by)\n')
+                     f'{model.equivalent_max_error_px:.3g} px over the raw image to '
+                     f"{report['equivalent_reach_deg']:.1f} deg (what a consumer rectifying "
+                     f"with it is off by){_beyond_90(report['equivalent_beyond_90deg_fraction'])}"
+                     '\n')
     sys.stdout.write(camera_info_yaml(model))
     return 0
 
