@@ -52,6 +52,7 @@ from mechdeconv_ros.lenses.lens_errors import FloatArray, ModelError
 from mechdeconv_ros.model.radial_map import hermite, RadialMap
 from mechdeconv_ros.optics.prescription import vertex_z
 from mechdeconv_ros.optics.surfaces import domain_limit_mm, sag
+from mechdeconv_ros.schema.params import scene_distance
 import numpy as np
 
 #: Newton iterations of the inverse projection (quadratic convergence from the untilted root).
@@ -162,11 +163,6 @@ def lines_at(field: RadialMap, theta: FloatArray) -> tuple[FloatArray, FloatArra
     return h, s
 
 
-def _scene_distance(model: Any) -> float:
-    distance = float(model.values['scene.distance_mm'])
-    return distance if distance > 0.0 else math.inf
-
-
 def _traced_lines(model: Any, theta: FloatArray) -> tuple[FloatArray, FloatArray]:
     """
     Return the lines at ``theta``: interpolated inside the model's trace, traced beyond it.
@@ -184,7 +180,8 @@ def _traced_lines(model: Any, theta: FloatArray) -> tuple[FloatArray, FloatArray
     guide = None
     if field.aim_offsets is not None:
         guide = (field.field_angle_rad, field.aim_offsets)
-    heights, slopes, _ = model.source.chief_lines(theta[order], _scene_distance(model), guide)
+    heights, slopes, _ = model.source.chief_lines(theta[order], scene_distance(model.values),
+                                                  guide)
     heights, slopes = np.asarray(heights, dtype=np.float64), np.asarray(slopes, np.float64)
     # The field ends at the first failure or non-increase of the height past the trace.
     good = np.isfinite(heights) & np.isfinite(slopes)

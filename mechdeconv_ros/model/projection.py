@@ -24,7 +24,7 @@ from typing import Any
 
 from mechdeconv_ros.lenses.lens_errors import FloatArray
 from mechdeconv_ros.model.assembly import project_angles, unproject_angles
-from mechdeconv_ros.model.underwater import is_exact_3d
+from mechdeconv_ros.model.underwater import exact_pixels, is_exact_3d
 import numpy as np
 
 
@@ -43,12 +43,9 @@ def pixels_of(model: Any, directions: FloatArray) -> FloatArray:
         theta = np.arccos(z)
         phi = np.arctan2(d[..., 1], d[..., 0])
     if is_exact_3d(model):
-        with np.errstate(invalid='ignore', divide='ignore'):
-            tx = np.where(z > 0, d[..., 0] / d[..., 2], np.nan)
-            ty = np.where(z > 0, d[..., 1] / d[..., 2], np.nan)
-        a, b = model.source.sensor_points(tx, ty, float(model.values['scene.distance_mm']))
-        u = model.K[0, 2] + a / model.pixel_mm[0]
-        v = model.K[1, 2] + b / model.pixel_mm[1]
+        # Traced exactly in 3-D through the port, scene at scene.distance_mm (0: infinity,
+        # past 90 deg too; a finite scene plane has no point at z <= 0: NaN).
+        u, v = exact_pixels(model, d)
     else:
         u, v = project_angles(model, theta, phi)
     return np.stack([np.asarray(u, float), np.asarray(v, float)], axis=-1)
