@@ -90,3 +90,26 @@ def test_salinity_change_rebuilds_image_rect_and_both_camera_infos(
         assert harness.revision() == revision + 1
     finally:
         outputs.close()
+
+
+def test_a_scene_at_infinity_behind_a_tilted_port_is_traced(harness: base.Harness) -> None:
+    # scene.distance_mm 0 (infinity) behind a tilted flat port: accepted and rebuilt (the
+    # rebuild once read the 0 as a distance and failed after the set had been accepted).
+    width, height = base.SMALL
+    src = base.test_pattern(width, height)
+    msg = make_image(src, 'mono8')
+    outputs = base.Outputs(harness.client)
+    harness.wait_subscribed()
+    try:
+        revision = harness.revision()
+        for name, value in (('port.tilt_x_deg', 1.0), ('scene.distance_mm', 0.0)):
+            results = harness.client.set_parameters(base.double(name, value))
+            assert [r.successful for r in results] == [True], results[0].reason
+            harness.values[name] = value
+        model = base.expected_model(harness.values, width, height)
+        new = base._exchange_until_model(harness, outputs, msg, model, timeout=20.0)
+        base.assert_camera_infos(new, model)
+        npt.assert_array_equal(image_to_array(new['image'])[0], Rectifier(model).correct(src))
+        assert harness.revision() == revision + 2
+    finally:
+        outputs.close()

@@ -238,9 +238,18 @@ class _Launch:
                  origin_z_mm: float = 0.0) -> None:
         self.points = points
         self.directions = directions
+        self.origin = np.array([0.0, 0.0, origin_z_mm])
         if directions is not None:
             self.e1, self.e2 = orthonormal_basis(directions)
-            self.origin = np.array([0.0, 0.0, origin_z_mm])
+            # Unknowns in mm: the finite-difference step moves the ray 1e-7 mm.
+            self.eps = np.full((directions.shape[0], 1), 1e-7)
+        else:
+            # Unknowns are slopes: a step of 1e-7 moves the ray at the pupil by 1e-7 times
+            # the point's distance, so far points (1e6 mm and beyond) get a smaller step.
+            reach = np.abs(origin_z_mm - points[:, 2])
+            with np.errstate(**_ERRSTATE):
+                self.eps = (1e-7 * np.minimum(1.0, 1e3 / reach))[:, None]
+            self.eps[~np.isfinite(self.eps)] = 1e-7
 
     def rays(self, rows: np.ndarray, u: np.ndarray) -> tuple[tuple[np.ndarray, ...], ...]:
         """Return the starting points and directions of the given rows at unknowns ``u``."""
@@ -293,7 +302,7 @@ def trace_scene_points(lens: Prescription, port: Port, medium_index: float,
                               axis=1)
     else:
         slopes = np.array(start, dtype=float).reshape(-1, 2)
-    launch = _Launch(pts, None)
+    launch = _Launch(pts, None, entrance_pupil_z(lens))
     out, slopes = _chief_rays(lens, port, medium_index, launch, sensor_z_mm, slopes)
     out[~in_medium(port, pts)] = np.nan
     return (out, slopes) if with_slopes else out
@@ -388,7 +397,6 @@ def _newton(port: Port, medium_index: float, launch: _Launch, rows: np.ndarray,
     2-D Newton, finite-difference Jacobian, backtracking (halving) while the miss grows.
     """
     u, value = np.array(u, dtype=float), np.array(value, dtype=float)
-    eps = 1e-7
     active = np.isfinite(value).all(axis=1)
     for _ in range(MAX_ITERATIONS):
         err = np.hypot(value[:, 0], value[:, 1])
@@ -396,8 +404,12 @@ def _newton(port: Port, medium_index: float, launch: _Launch, rows: np.ndarray,
         if todo.size == 0:
             break
         s0 = u[todo]
-        fx = _stop_xy(port, medium_index, launch, rows[todo], s0 + [eps, 0.0], stop_system)
-        fy = _stop_xy(port, medium_index, launch, rows[todo], s0 + [0.0, eps], stop_system)
+        eps = launch.eps[rows[todo]]
+        zero = np.zeros_like(eps)
+        fx = _stop_xy(port, medium_index, launch, rows[todo], s0 + np.hstack([eps, zero]),
+                      stop_system)
+        fy = _stop_xy(port, medium_index, launch, rows[todo], s0 + np.hstack([zero, eps]),
+                      stop_system)
         j = np.stack([(fx - value[todo]) / eps, (fy - value[todo]) / eps], axis=2)
         with np.errstate(**_ERRSTATE):
             det = j[:, 0, 0] * j[:, 1, 1] - j[:, 0, 1] * j[:, 1, 0]
@@ -418,8 +430,10 @@ def _newton(port: Port, medium_index: float, launch: _Launch, rows: np.ndarray,
             if pending.size == 0:
                 break
         active[todo[pending]] = False
+    # A ray that stalled below 1e3 x the tolerance (a far point's slope has no more digits)
+    # has converged as far as doubles allow.
     err = np.hypot(value[:, 0], value[:, 1])
-    return u, value, active & (err <= 1e3 * STOP_TOLERANCE_MM)
+    return u, value, err <= 1e3 * STOP_TOLERANCE_MM
 
 
 def _prefix(system: System, z_stop: float) -> System:
