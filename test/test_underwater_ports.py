@@ -20,8 +20,10 @@ Ports at the edges of their use (issue 37): infinity, air written out, the housi
 
 from __future__ import annotations
 
+import importlib.util
 import math
 from pathlib import Path
+import re
 
 import cv2
 from mechdeconv_ros.imaging.remap import build_float_maps
@@ -231,3 +233,19 @@ def test_cells_without_an_exact_ray_are_masked(fisheye_decentred: object) -> Non
     px = np.round(c * (fisheye_decentred.out_width - 1) / (cols - 1)).astype(int)
     py = np.round(r * (fisheye_decentred.out_height - 1) / (rows - 1)).astype(int)
     assert np.all(map_x[py, px] < -999.0)
+
+
+def test_the_page_quotes_the_script() -> None:
+    # docs/underwater.md's numbers of the water, the tilt and the shipped example are those
+    # tools/underwater_numbers.py prints (its slower sections: run it by hand).
+    spec = importlib.util.spec_from_file_location(
+        'underwater_numbers', ROOT / 'tools' / 'underwater_numbers.py')
+    numbers = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(numbers)
+    page = (ROOT / 'docs' / 'underwater.md').read_text()
+    for section in (numbers.water, numbers.tilt, numbers.shipped):
+        for line in section():
+            for token in re.findall(r'[-+]?\d+\.\d+(?:e[-+]\d+)?', line):
+                value = float(token)
+                quoted = {token, f'{value:g}', f'{value:.1e}'.replace('e-0', 'e-')}
+                assert any(q in page for q in quoted), f'{token} ({line}) is not on the page'
