@@ -138,7 +138,7 @@ def reference() -> list[str]:
 
 
 def remap() -> list[str]:
-    """Return the remap (radial + splined residual) against the exact trace, 400 pixels."""
+    """Return the maps (radial + splined residual) against the exact trace, 400 pixels."""
     lines = [f'residual grid: {RESIDUAL_GRID[0]} x {RESIDUAL_GRID[1]} nodes']
     hd = {'sensor.width_px': 1920, 'sensor.height_px': 1080}
     cooke = {'sensor.pixel_size_x_um': 5.0, 'sensor.pixel_size_y_um': 5.0, **hd,
