@@ -20,7 +20,9 @@ air) with the port of the ``port.*`` values and the medium of the ``scene.*`` va
   v = v_c l / l_c (v_c per unit tan(theta_c), :func:`sensor_plane.chief_ray_scale`).
 - a tilted flat port or a decentred dome breaks the symmetry: the radial map is that of the
   symmetric port, and :meth:`PortedSource.sensor_points` traces scene points exactly in 3-D
-  (:func:`mechdeconv_ros.optics.ports.trace_scene_points`).
+  (:func:`mechdeconv_ros.optics.ports.trace_scene_points`), a scene at infinity its
+  directions (:func:`mechdeconv_ros.optics.ports.trace_scene_directions`).
+- ``scene.medium_index`` 1 is air written out: no port path (:func:`has_port`).
 
 Refusals (each names its parameter): a datasheet lens (no surfaces), a moving lens, a port
 thickness, distance or radius <= 0, a dome whose inner sphere meets a lens surface, a scene

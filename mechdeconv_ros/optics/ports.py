@@ -32,7 +32,18 @@ rays in 3-D: the scene point P, in the medium, sends the ray P + s k (k unit) th
 (:mod:`mechdeconv_ros.optics.trace3d`); the chief ray is the one crossing the stop plane at
 its centre, found by a 2-D Newton on the direction's (k_x / k_z, k_y / k_z) with a
 finite-difference Jacobian, started from the symmetric port's chief ray (or the line toward
-the stop centre) and converged to 1e-10 mm at the stop.
+the stop centre) and converged to 1e-10 mm at the stop. A start that the port stops (a tilted
+port reflects totally where the symmetric one did not) is continued: aimed through the port
+with 0, 1/4, 1/2, 3/4 of its tilt and decentring first. The chief ray is clipped by the lens's
+edges, not by its clear semi-diameters (it stands for the beam's centre). A scene point must
+lie in the water (:func:`in_medium`): in front of the flat port's outer plane, outside the
+dome's outer sphere; a ray is never traced backwards to the port.
+
+A scene at infinity (:func:`trace_scene_directions`): a direction has an exact image through
+any port. Its rays are parallel in the medium (unit k); the chief ray is the one through the
+stop centre, found by the same Newton on the ray's offset (u_1, u_2) square to k from a point
+on the axis, O + u_1 e_1 + u_2 e_2 (e_1, e_2 an orthonormal basis square to k), so k may
+pass 90 deg to the axis (a fisheye behind a dome).
 """
 
 from __future__ import annotations

@@ -148,7 +148,8 @@ UNDERWATER_SPECS: tuple[ParamSpec, ...] = (
        'Temperature of the water; 0-30 degC (the range of the formula).', -1.0e3, 1.0e3),
     _d('scene.medium_index', 0.0, '1',
        'Index of the medium of the scene relative to air at every wavelength (overrides '
-       'the formula of scene.medium: no dispersion); 0 = from scene.medium. Below 1 is refused.',
+       'the formula of scene.medium: no dispersion); 0 = from scene.medium; 1 = air, as '
+       'scene.medium air. Below 1 is refused.',
        0.0, 4.0),
     ParamSpec('port.type', 'string', 'none', '',
               'Window in front of the lens: none, flat (a plane-parallel plate) or dome (a '
