@@ -392,8 +392,8 @@ class PortedSource(LensSource):
         A finite scene: the point at Z = l on each direction (none for Z <= 0: the scene
         plane does not reach 90 deg), traced from there; it must lie in the water, in front
         of the port's outer face. At infinity: the direction in the medium, its parallel rays'
-        chief ray (:func:`mechdeconv_ros.optics.ports.trace_scene_directions`), past 90 deg
-        too.
+        chief ray (:func:`mechdeconv_ros.optics.ports.trace_scene_directions`), at any angle
+        to the axis the lens passes.
 
         :param directions: ``(..., 3)``, need not be unit.
         :param distance_mm: l from the lens's H (``math.inf`` allowed).

@@ -44,7 +44,7 @@ def pixels_of(model: Any, directions: FloatArray) -> FloatArray:
         phi = np.arctan2(d[..., 1], d[..., 0])
     if is_exact_3d(model):
         # Traced exactly in 3-D through the port, scene at scene.distance_mm (0: infinity,
-        # past 90 deg too; a finite scene plane has no point at z <= 0: NaN).
+        # any angle; a finite scene plane has no point at z <= 0: NaN).
         u, v = exact_pixels(model, d)
     else:
         u, v = project_angles(model, theta, phi)

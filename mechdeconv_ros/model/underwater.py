@@ -16,9 +16,13 @@ port or a decentred dome: each point's chief ray traced exactly in 3-D
 Remap (:func:`residual_maps`): exact per-pixel Newton over 1080p is too slow, so a non-symmetric
 port's maps are the symmetric port's (radial, exact to the curve's interpolation) plus a
 residual (exact 3-D pixel minus the radial one) traced on a RESIDUAL_GRID of output pixels
-(corners included) and carried to every pixel by a separable natural cubic spline; nodes
-without a ray (beyond the valid field) are filled harmonically from the others (Laplace), so
-the spline stays smooth up to the field's edge. Its error against the exact trace is measured by
+(corners included) and carried to every pixel by a separable natural cubic spline. A node's
+direction is the output projection's own (no angle clamped); nodes without a ray (beyond the
+valid field, past 90 deg on a finite scene plane) are filled harmonically from the others
+(Laplace), so the spline stays smooth elsewhere, and the pixels of every grid cell they are a
+corner of are masked (NaN: the remap leaves them outside) rather than given a made-up residual.
+A scene at infinity (``scene.distance_mm`` 0, :func:`mechdeconv_ros.schema.params.scene_distance`)
+is traced exactly too, direction by direction. Its error against the exact trace is measured by
 test/test_underwater.py (well under 0.05 px for 1 deg of tilt and 1 mm of decentring).
 
 Non-central error (:func:`noncentral_errors`): a camera behind a flat port has no single
@@ -81,8 +85,8 @@ def exact_pixels(model: Any, directions: FloatArray) -> tuple[FloatArray, FloatA
 
     :param model: a model whose source is a :class:`PortedSource`.
     :param directions: ``(..., 3)`` in the optical frame (X right, Y down, Z ahead); a finite
-        scene has none at Z <= 0 (NaN), a scene at infinity (``scene.distance_mm`` 0) is
-        traced past 90 deg too.
+        scene has none at Z <= 0 (NaN); a scene at infinity (``scene.distance_mm`` 0) is
+        traced at any angle to the axis.
     :return: ``(u, v)``, NaN where no chief ray passes.
     """
     a, b = model.source.sensor_directions(directions, scene_distance(model.values))

@@ -42,8 +42,8 @@ dome's outer sphere; a ray is never traced backwards to the port.
 A scene at infinity (:func:`trace_scene_directions`): a direction has an exact image through
 any port. Its rays are parallel in the medium (unit k); the chief ray is the one through the
 stop centre, found by the same Newton on the ray's offset (u_1, u_2) square to k from a point
-on the axis, O + u_1 e_1 + u_2 e_2 (e_1, e_2 an orthonormal basis square to k), so k may
-pass 90 deg to the axis (a fisheye behind a dome).
+on the axis, O + u_1 e_1 + u_2 e_2 (e_1, e_2 an orthonormal basis square to k), which holds
+at any angle of k to the axis.
 """
 
 from __future__ import annotations
