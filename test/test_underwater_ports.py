@@ -32,7 +32,8 @@ from mechdeconv_ros.model.model import build_model
 from mechdeconv_ros.model.projection import pixels_of
 from mechdeconv_ros.model.underwater import ideal_directions, project_points, residual_nodes
 from mechdeconv_ros.optics.ports import trace_scene_points
-from mechdeconv_ros.schema.params import load_params_file, to_params_yaml
+from mechdeconv_ros.schema.params import (
+    load_params_file, scene_distance, scene_in_air, to_params_yaml)
 from mechdeconv_ros.tools import cli
 import numpy as np
 import numpy.testing as npt
@@ -249,3 +250,16 @@ def test_the_page_quotes_the_script() -> None:
                 value = float(token)
                 quoted = {token, f'{value:g}', f'{value:.1e}'.replace('e-0', 'e-')}
                 assert any(q in page for q in quoted), f'{token} ({line}) is not on the page'
+
+
+@pytest.mark.parametrize('values,distance,air', [
+    ({'scene.distance_mm': 0.0}, math.inf, True),
+    ({'scene.distance_mm': 1500.0, 'scene.medium_index': 1.0}, 1500.0, True),
+    ({'scene.distance_mm': 1500.0, 'scene.medium': 'water', 'scene.medium_index': 1.0},
+     1500.0, True),
+    ({'scene.distance_mm': 20.0, 'scene.medium': 'water'}, 20.0, False),
+    ({'scene.distance_mm': 20.0, 'scene.medium_index': 1.0001}, 20.0, False),
+], ids=['infinity-air', 'index-1', 'index-1-over-water', 'water', 'index-above-1'])
+def test_the_one_reading_of_distance_and_air(values: dict, distance: float, air: bool) -> None:
+    assert scene_distance(values) == distance
+    assert scene_in_air(values) is air
