@@ -8,7 +8,9 @@ PMMA port 5 mm in front of the lens, seawater at 0 PSU. ``ros2 param set scene.s
 35.0`` through the real ``/correct_node/set_parameters`` service rebuilds the model like any
 lens change: image_rect and both CameraInfos follow the in-process model of the new values,
 and every output frame is consistent with one model (its camera_info's D and its pixels),
-never a mix; /diagnostics reports the non-central error.
+never a mix; /diagnostics reports the non-central error. Then the port tilted 1 deg and the
+scene set to infinity (``scene.distance_mm`` 0): both sets are accepted and rebuild the model
+(traced exactly through the tilted port at infinity), image_rect and both CameraInfos follow.
 """
 
 from __future__ import annotations
