@@ -21,7 +21,6 @@ Everything runs in one process, in interleaved rounds (:func:`benchmarks.common.
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 import sys
 import time
@@ -35,7 +34,7 @@ from mechdeconv_ros.imaging.remap import Rectifier
 from mechdeconv_ros.model.model import build_model
 from mechdeconv_ros.optics import illumination as il
 from mechdeconv_ros.optics.raytrace import image_plane
-from mechdeconv_ros.schema.params import load_params_file
+from mechdeconv_ros.schema.params import load_params_file, scene_distance
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
@@ -188,7 +187,7 @@ def agreement(rays: int, configs: tuple[str, ...] = ('wide_angle', 'fisheye')
         model = build_model(values)
         curve = model.illumination()
         radius, surface = il.stop_of(model.values)
-        distance = float(values['scene.distance_mm']) or math.inf
+        distance = scene_distance(values)
         sensor_z, _ = image_plane(model.prescription, distance)
         on_axis = il.beam_area(il.backward_system(model.prescription, radius, surface,
                                                   sensor_z), np.zeros(1))[0]

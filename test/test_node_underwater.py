@@ -8,7 +8,9 @@ PMMA port 5 mm in front of the lens, seawater at 0 PSU. ``ros2 param set scene.s
 35.0`` through the real ``/correct_node/set_parameters`` service rebuilds the model like any
 lens change: image_rect and both CameraInfos follow the in-process model of the new values,
 and every output frame is consistent with one model (its camera_info's D and its pixels),
-never a mix; /diagnostics reports the non-central error.
+never a mix; /diagnostics reports the non-central error. Then the port tilted 1 deg and the
+scene set to infinity (``scene.distance_mm`` 0): both sets are accepted and rebuild the model
+(traced exactly through the tilted port at infinity), image_rect and both CameraInfos follow.
 """
 
 from __future__ import annotations
@@ -88,5 +90,28 @@ def test_salinity_change_rebuilds_image_rect_and_both_camera_infos(
         refused = harness.client.set_parameters(base.double('scene.salinity_psu', 40.0))
         assert not refused[0].successful and 'scene.salinity_psu' in refused[0].reason
         assert harness.revision() == revision + 1
+    finally:
+        outputs.close()
+
+
+def test_a_scene_at_infinity_behind_a_tilted_port_is_traced(harness: base.Harness) -> None:
+    # scene.distance_mm 0 (infinity) behind a tilted flat port: accepted and rebuilt (the
+    # rebuild once read the 0 as a distance and failed after the set had been accepted).
+    width, height = base.SMALL
+    src = base.test_pattern(width, height)
+    msg = make_image(src, 'mono8')
+    outputs = base.Outputs(harness.client)
+    harness.wait_subscribed()
+    try:
+        revision = harness.revision()
+        for name, value in (('port.tilt_x_deg', 1.0), ('scene.distance_mm', 0.0)):
+            results = harness.client.set_parameters(base.double(name, value))
+            assert [r.successful for r in results] == [True], results[0].reason
+            harness.values[name] = value
+        model = base.expected_model(harness.values, width, height)
+        new = base._exchange_until_model(harness, outputs, msg, model, timeout=20.0)
+        base.assert_camera_infos(new, model)
+        npt.assert_array_equal(image_to_array(new['image'])[0], Rectifier(model).correct(src))
+        assert harness.revision() == revision + 2
     finally:
         outputs.close()

@@ -105,7 +105,9 @@ def test_round_trips(models, key) -> None:
 
 def test_the_regression_reference_covers_the_shipped_configs() -> None:
     configs = {Path(DATA['cases'][key]['config']).name for key in CASES}
-    shipped = {p.name for p in (ROOT / 'config').glob('*.yaml')}
+    # stereo_node's params files hold two cameras of the shipped lenses (test_stereo.py).
+    shipped = {p.name for p in (ROOT / 'config').glob('*.yaml')
+               if not p.name.startswith('stereo')}
     assert configs == shipped
     assert DATA['commit'] == '0a30dce'
     assert any(DATA['cases'][key]['values'].get('sensor.tilt_x_deg') for key in CASES)

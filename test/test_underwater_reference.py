@@ -11,8 +11,15 @@ entrance pupil, 2 mm off it, 1 mm decentred in x and in y; fresh water and seawa
 and 656 nm) a 21 x 21 grid of scene directions (11 x 11 of it for most cases: see the JSON's
 ``keep``), optiland's chief ray on our sensor plane as a raw pixel.
 
-Asserted: wherever optiland has a ray, ``mechdeconv_ros.model.underwater.project_points``
-(what ``mechdeconv project`` prints) has one too and lands within 0.01 px of it.
+The grid is traced whole (the generator drops no direction): optiland's null means it has no
+chief ray to the sensor there.
+
+Asserted: ``mechdeconv_ros.model.underwater.project_points`` (what ``mechdeconv project``
+prints) has a pixel exactly where optiland has one (no nan where optiland traces a ray, none
+where it traces none: the ends of the field agree) and lands within 0.01 px of it; and the
+reference tells the signs apart: the model with a port tilt or decentring of the opposite
+sign misses it by far more than the tolerance (the signs tested by value, against optiland's
+independently checked geometry).
 """
 
 from __future__ import annotations
@@ -52,15 +59,18 @@ def directions(case: dict) -> tuple[np.ndarray, np.ndarray]:
     return tx.ravel(), ty.ravel()
 
 
-def errors(case: dict) -> tuple[np.ndarray, int]:
-    """Return our distances from optiland's pixels (px) and how many rays optiland has."""
-    model = build_model(case_values(case))
+def errors(case: dict, flip: str = '') -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return our distances from optiland's pixels (px, where both have one) and the masks."""
+    values = case_values(case)
+    if flip:
+        values[flip] = -float(values[flip])
+    model = build_model(values)
     u_ref = np.array([np.nan if u is None else u for u in case['u']])
     v_ref = np.array([np.nan if v is None else v for v in case['v']])
-    keep = np.isfinite(u_ref)
     tx, ty = directions(case)
-    u, v = project_points(model, tx[keep], ty[keep])
-    return np.hypot(u - u_ref[keep], v - v_ref[keep]), int(keep.sum())
+    u, v = project_points(model, tx, ty)
+    ref, ours = np.isfinite(u_ref), np.isfinite(u)
+    return np.hypot(u - u_ref, v - v_ref)[ref & ours], ref, ours
 
 
 def test_the_reference_covers_the_issue() -> None:
@@ -76,7 +86,30 @@ def test_the_reference_covers_the_issue() -> None:
 
 @pytest.mark.parametrize('key', sorted(CASES))
 def test_project_matches_optiland(key: str) -> None:
-    err, count = errors(CASES[key])
-    assert count >= 5, f'{key}: optiland traced only {count} rays'
-    assert np.all(np.isfinite(err)), f'{key}: {np.sum(~np.isfinite(err))} rays missing'
+    err, ref, ours = errors(CASES[key])
+    assert ref.sum() >= 5, f'{key}: optiland traced only {ref.sum()} rays'
+    assert not np.any(ref & ~ours), f'{key}: nan for {np.sum(ref & ~ours)} rays optiland traces'
+    assert not np.any(ours & ~ref), f'{key}: {np.sum(ours & ~ref)} pixels optiland has no ray for'
     assert np.max(err) < TOLERANCE_PX, f'{key}: {np.max(err):.3g} px'
+
+
+def test_the_reference_is_the_whole_grid() -> None:
+    # Every case stores every direction of its grid (null included): none was left out
+    # because our model did not see it.
+    for key, case in CASES.items():
+        grid = case['grid']
+        side = len(range(0, grid['n'], grid['step']))
+        assert len(case['u']) == side * side, key
+
+
+@pytest.mark.parametrize('key,flip', [
+    ('cooke_flat_tilt_x1', 'port.tilt_x_deg'), ('cooke_flat_tilt_y1', 'port.tilt_y_deg'),
+    ('cooke_dome_dx1', 'port.decenter_x_mm'), ('cooke_dome_dy1', 'port.decenter_y_mm'),
+    ('fisheye_flat_tilt_x1', 'port.tilt_x_deg'), ('fisheye_dome_dy1', 'port.decenter_y_mm'),
+], ids=['cooke-tilt-x', 'cooke-tilt-y', 'cooke-dx', 'cooke-dy', 'fisheye-tilt-x',
+        'fisheye-dy'])
+def test_the_opposite_sign_misses_optiland(key: str, flip: str) -> None:
+    # The right sign lands within TOLERANCE_PX (test_project_matches_optiland); the opposite
+    # one is off by far more, so the reference fixes each sign by value.
+    err, _, _ = errors(CASES[key], flip)
+    assert np.max(err) > 100.0 * TOLERANCE_PX, f'{key}: {np.max(err):.3g} px with {flip} flipped'

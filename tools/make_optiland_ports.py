@@ -13,8 +13,13 @@ to our sensor plane. The suite (test/test_underwater_reference.py) compares ``pr
 
 What comes from our code (inputs, not the checked outputs): the surfaces of each lens (its
 config), the indices at the wavelength (our glass module and the Quan & Fry water index,
-both tested on their own), the sensor plane, and the grid (21 x 21 directions spanning 95 %
-of the raw image as our model sees it, points outside its valid field dropped). optiland
+both tested on their own), the sensor plane, the grid (21 x 21 directions spanning 95 % of
+the raw image by the pinhole K of our model) and the starts of the wide lenses' aiming (our
+3-D chief ray's slopes where we have one, else the symmetric port's: a start only, the
+solution is where optiland's own ray meets the stop centre). Every direction of the grid is
+traced: null only where optiland has no chief ray to the sensor (a tilted port's rays that
+optiland reflects totally are aimed again with 0, 1/4, ... 1 of the tilt, optiland's optic
+each time, so a start past the critical angle does not lose a ray optiland can trace). optiland
 gets the port as surfaces: flat faces turned by rx / ry (radians, about each face's own axis
 point; the outer face's axis point at z_i - t / cos(tilt) keeps the faces parallel) and dome
 spheres displaced by dx / dy. The sign of optiland's rotations is checked geometrically here:
@@ -168,7 +173,7 @@ def decentre(optic: Any, port: Any) -> None:
 
 
 def aim_real(optic: Any, x0: np.ndarray, y0: np.ndarray, z0: float, slopes: np.ndarray,
-             wl_um: float) -> tuple[np.ndarray, ...]:
+             wl_um: float, with_slopes: bool = False) -> tuple[np.ndarray, ...]:
     """
     Aim chief rays with optiland's real-ray trace: a 2-D Newton on (L/N, M/N) to the stop centre.
 
@@ -202,7 +207,53 @@ def aim_real(optic: Any, x0: np.ndarray, y0: np.ndarray, z0: float, slopes: np.n
         det = j11 * j22 - j12 * j21
         sl = sl - np.stack([(j22 * sx - j12 * sy) / det, (-j21 * sx + j11 * sy) / det], axis=1)
     sx, sy, ix, iy = trace(sl)
+    if with_slopes:
+        return ix, iy, np.hypot(sx, sy), sl
     return ix, iy, np.hypot(sx, sy)
+
+
+def start_slopes(source: Any, pts: np.ndarray, tx: np.ndarray, ty: np.ndarray,
+                 distance: float) -> np.ndarray:
+    """
+    Return the slopes that start optiland's aiming: our 3-D chief rays', else the symmetric's.
+
+    Only a start: optiland's Newton finds where its own ray meets the stop centre.
+    """
+    symmetric = source.symmetric_slopes(tx, ty, distance)
+    ours, slopes = trace_scene_points(
+        source.lens.prescription, source.port, source.medium_index, pts,
+        source.sensor_z_lens_frame(distance), symmetric, with_slopes=True)
+    found = np.isfinite(ours).all(axis=1) & np.isfinite(slopes).all(axis=1)
+    return np.where(found[:, None], slopes, symmetric)
+
+
+def continued(source: Any, port: Any, sensor_z: float, gap: float, sign: float,
+              field_max: float, x_obj: np.ndarray, y_obj: np.ndarray, z_object: float,
+              slopes: np.ndarray, first: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
+    """
+    Aim again, with optiland, the rays its first aiming lost, by continuation in the tilt.
+
+    A start whose ray optiland reflects totally (near the critical angle) is aimed through
+    the port with 0, 1/4, ..., 1 of its tilt, each optic optiland's, each solution starting the
+    next: what optiland traces does not depend on our tracer's start there.
+    """
+    import dataclasses
+
+    x_img, y_img, residual = (np.array(a, dtype=float) for a in first)
+    lost = ~(np.isfinite(x_img) & (residual < 1e-8))
+    if not lost.any():
+        return x_img, y_img, residual
+    sl = slopes[lost].copy()
+    for fraction in (0.0, 0.25, 0.5, 0.75, 1.0):
+        part = dataclasses.replace(port, tilt_x_rad=fraction * port.tilt_x_rad,
+                                   tilt_y_rad=fraction * port.tilt_y_rad)
+        optic = _rebuilt(source, part, sensor_z, gap, sign, field_max)
+        xi, yi, res, new = aim_real(optic, x_obj[lost], y_obj[lost], z_object, sl,
+                                    source.wavelength_nm / 1000.0, with_slopes=True)
+        good = np.isfinite(new).all(axis=1) & (res < 1e-8)
+        sl[good] = new[good]
+    x_img[lost], y_img[lost], residual[lost] = xi, yi, res
+    return x_img, y_img, residual
 
 
 def flat_outer_offset(port: Any) -> float:
@@ -223,12 +274,10 @@ def trace_case(key: str, lens: str, overrides: dict[str, Any]) -> dict[str, Any]
     z_h = source.first_order().front_principal_z_mm
     z_scene = z_h - distance + source.shift_mm      # combined frame
     sensor_z = source.image_plane(distance)[0]
-    # Only the directions our model sees (a flat port ends a wide lens's field near the
-    # critical angle): optiland traces those (the others are stored as null).
-    from mechdeconv_ros.model.underwater import project_points
-    valid = np.isfinite(project_points(model, tx, ty)[0])
+    # The whole grid: optiland decides where a chief ray reaches the sensor (our model is
+    # checked to have one wherever optiland has, and none where optiland has none).
+    valid = np.ones(tx.shape, dtype=bool)
     tx_all, ty_all = tx, ty
-    tx, ty = tx[valid], ty[valid]
     x_obj, y_obj = tx * distance, ty * distance
     field_max = float(np.max(np.hypot(x_obj, y_obj))) * 1.01
     tilted = port is not None and port.kind == 'flat' and not port.symmetric
@@ -262,15 +311,16 @@ def trace_case(key: str, lens: str, overrides: dict[str, Any]) -> dict[str, Any]
             # (1e-12 mm), whatever the start.
             pts = np.stack([x_obj, y_obj, np.full(x_obj.shape, z_scene - source.shift_mm)],
                            axis=1)
-            _, slopes = trace_scene_points(
-                source.lens.prescription, port, source.medium_index, pts,
-                source.sensor_z_lens_frame(distance),
-                source.symmetric_slopes(tx, ty, distance), with_slopes=True)
+            slopes = start_slopes(source, pts, tx, ty, distance)
             if port is not None and port.kind == 'dome' and not port.symmetric:
                 decentre(optic, port)
             z_object = float(optic.surfaces[0].geometry.cs.z)     # optiland's frame
             x_img, y_img, residual = aim_real(optic, x_obj, y_obj, z_object, slopes,
                                               source.wavelength_nm / 1000.0)
+            if tilted:
+                x_img, y_img, residual = continued(
+                    source, port, sensor_z, -z_scene, sign, field_max, x_obj, y_obj,
+                    z_object, slopes, (x_img, y_img, residual))
         else:
             x_img, y_img = np.array(rays.x, dtype=float), np.array(rays.y, dtype=float)
             residual = np.hypot(at(stop, 'x'), at(stop, 'y'))

@@ -233,12 +233,18 @@ def _build_maps(model: LensModel, gain_table: npt.NDArray[np.float64] | None
     """Build the float maps and, given a gain table over the curve's ideal radii, the gain."""
     map_x, map_y, gain = _build_radial_maps(model, gain_table)
     # A tilted flat port or a decentred dome: the exact 3-D residual, splined from a grid
-    # (mechdeconv_ros.model.underwater.residual_maps); pixels outside stay outside.
+    # (mechdeconv_ros.model.underwater.residual_maps); pixels outside stay outside, and so
+    # do those whose residual is masked (NaN: a grid cell with a node no exact ray reaches).
     residual = underwater.residual_maps(model)
     if residual is not None:
         inside = map_x != np.float32(_OUTSIDE)
         map_x[inside] += residual[0][inside]
         map_y[inside] += residual[1][inside]
+        masked = inside & ~np.isfinite(residual[0])
+        map_x[masked] = np.float32(_OUTSIDE)
+        map_y[masked] = np.float32(_OUTSIDE)
+        if gain is not None:
+            gain[masked] = 0.0
     return map_x, map_y, gain
 
 

@@ -9,7 +9,8 @@ its lens sources (:mod:`mechdeconv_ros.lenses.lens_source`), the refusal rules
 (:mod:`mechdeconv_ros.model.camera_info_fit`) and the summary all import it, so none of them has to
 import another to raise or annotate.
 
-A scene distance of 0 in ``scene.distance_mm`` means infinity (``math.inf`` here).
+A scene distance of 0 in ``scene.distance_mm`` means infinity: read it with
+:func:`mechdeconv_ros.schema.params.scene_distance`, the one reading of that sentinel.
 """
 
 from __future__ import annotations
@@ -86,17 +87,6 @@ def stop_param(values: Mapping[str, Any]) -> str:
     :return: ``lens.stop_surface`` or ``lens.stop_offset_mm``.
     """
     return 'lens.stop_surface' if is_prescription_mode(values) else 'lens.stop_offset_mm'
-
-
-def scene_distance(values: Mapping[str, Any]) -> float:
-    """
-    Return the scene distance from H in mm (``math.inf`` for ``scene.distance_mm`` = 0).
-
-    :param values: checked parameter values.
-    :return: l.
-    """
-    distance = float(values['scene.distance_mm'])
-    return math.inf if distance == 0.0 else distance
 
 
 def half_diagonal_mm(width: int, height: int, pixel_mm: tuple[float, float]) -> float:

@@ -20,7 +20,9 @@ air) with the port of the ``port.*`` values and the medium of the ``scene.*`` va
   v = v_c l / l_c (v_c per unit tan(theta_c), :func:`sensor_plane.chief_ray_scale`).
 - a tilted flat port or a decentred dome breaks the symmetry: the radial map is that of the
   symmetric port, and :meth:`PortedSource.sensor_points` traces scene points exactly in 3-D
-  (:func:`mechdeconv_ros.optics.ports.trace_scene_points`).
+  (:func:`mechdeconv_ros.optics.ports.trace_scene_points`), a scene at infinity its
+  directions (:func:`mechdeconv_ros.optics.ports.trace_scene_directions`).
+- ``scene.medium_index`` 1 is air written out: no port path (:func:`has_port`).
 
 Refusals (each names its parameter): a datasheet lens (no surfaces), a moving lens, a port
 thickness, distance or radius <= 0, a dome whose inner sphere meets a lens surface, a scene
@@ -39,11 +41,12 @@ from mechdeconv_ros.lenses.refusals import check_surfaces
 from mechdeconv_ros.lenses.sensor_plane import blur_diameter_mm, chief_ray_scale, sensor_plane
 from mechdeconv_ros.optics.glass import GlassError, lookup
 from mechdeconv_ros.optics.ports import (
-    entrance_pupil_z, Port, ported_prescription, trace_scene_points)
+    entrance_pupil_z, Port, ported_prescription, trace_scene_directions, trace_scene_points)
 from mechdeconv_ros.optics.prescription import paraxial, Prescription, vertex_z
 from mechdeconv_ros.optics.raytrace import aim_chief_rays, trace_field, trace_field_rays
 from mechdeconv_ros.optics.surfaces import sag
 from mechdeconv_ros.optics.water import SEAWATER_SALINITY_PSU, water_index, WaterError
+from mechdeconv_ros.schema.params import scene_in_air
 import numpy as np
 
 #: A flat port's chief rays beyond the critical angle by this much are not aimed (rad).
@@ -55,10 +58,12 @@ _CLEARANCE_SAMPLES = 33
 
 
 def has_port(values: Mapping[str, Any]) -> bool:
-    """Return True when the values put a port or a medium other than air before the lens."""
-    return (str(values.get('port.type', 'none')) != 'none'
-            or str(values.get('scene.medium', 'air')) != 'air'
-            or float(values.get('scene.medium_index', 0.0)) > 0.0)
+    """
+    Return True when the values put a port or a medium other than air before the lens.
+
+    ``scene.medium_index`` 1.0 is air written out (:func:`scene_in_air`): no port path.
+    """
+    return str(values.get('port.type', 'none')) != 'none' or not scene_in_air(values)
 
 
 def medium_index(values: Mapping[str, Any], wavelength_nm: float) -> float:
@@ -370,21 +375,80 @@ class PortedSource(LensSource):
 
         :param tx: X / Z of the scene points (Z = l from the lens's H), any shape.
         :param ty: Y / Z.
-        :param distance_mm: l (finite).
+        :param distance_mm: l (``math.inf``: a scene at infinity, the direction in the
+            medium).
         :return: ``(a, b)``: the read-out offsets from the axis on the sensor, mm (upright:
             the inverted physical image turned 180 deg, a = -x, b = -y); NaN where none passes.
         """
         tx, ty = np.broadcast_arrays(np.asarray(tx, dtype=float), np.asarray(ty, dtype=float))
-        if math.isinf(distance_mm):
-            raise NotApplicable('the 3-D port trace needs a finite scene.distance_mm')
-        z_scene = self.lens.first_order().front_principal_z_mm - distance_mm
-        points = np.stack([tx.ravel() * distance_mm, ty.ravel() * distance_mm,
-                           np.full(tx.size, z_scene)], axis=1)
+        return self.sensor_directions(np.stack([tx, ty, np.ones(tx.shape)], axis=-1),
+                                      distance_mm)
+
+    def sensor_directions(self, directions: FloatArray, distance_mm: float
+                          ) -> tuple[FloatArray, FloatArray]:
+        """
+        Trace scene directions (optical frame, X right, Y down, Z ahead) exactly in 3-D.
+
+        A finite scene: the point at Z = l on each direction (none for Z <= 0: the scene
+        plane does not reach 90 deg), traced from there; it must lie in the water, in front
+        of the port's outer face. At infinity: the direction in the medium, its parallel rays'
+        chief ray (:func:`mechdeconv_ros.optics.ports.trace_scene_directions`), at any angle
+        to the axis the lens passes.
+
+        :param directions: ``(..., 3)``, need not be unit.
+        :param distance_mm: l from the lens's H (``math.inf`` allowed).
+        :return: ``(a, b)`` as :meth:`sensor_points`, shape ``directions.shape[:-1]``.
+        """
+        d = np.asarray(directions, dtype=float)
+        shape = d.shape[:-1]
+        d = d.reshape(-1, 3)
         port = self.port if self.port is not None else Port('flat', 0.0, 1.0, distance_mm=0.0)
-        out = trace_scene_points(self.lens.prescription, port, self.medium_index, points,
-                                 self.sensor_z_lens_frame(distance_mm),
-                                 self.symmetric_slopes(tx.ravel(), ty.ravel(), distance_mm))
-        return -out[:, 0].reshape(tx.shape), -out[:, 1].reshape(tx.shape)
+        sensor_z = self.sensor_z_lens_frame(distance_mm)
+        if math.isinf(distance_mm):
+            with np.errstate(invalid='ignore', divide='ignore'):
+                k = np.stack([-d[:, 0], -d[:, 1], d[:, 2]], axis=1)
+                k /= np.linalg.norm(k, axis=1, keepdims=True)
+            out = np.full((k.shape[0], 2), np.nan)
+            good = np.isfinite(k).all(axis=1)
+            if good.any():
+                out[good] = trace_scene_directions(
+                    self.lens.prescription, port, self.medium_index, k[good], sensor_z,
+                    self._symmetric_points(k[good]))
+        else:
+            with np.errstate(invalid='ignore', divide='ignore'):
+                tx = np.where(d[:, 2] > 0.0, d[:, 0] / d[:, 2], np.nan)
+                ty = np.where(d[:, 2] > 0.0, d[:, 1] / d[:, 2], np.nan)
+            z_scene = self.lens.first_order().front_principal_z_mm - distance_mm
+            points = np.stack([tx * distance_mm, ty * distance_mm,
+                               np.full(tx.size, z_scene)], axis=1)
+            out = trace_scene_points(self.lens.prescription, port, self.medium_index, points,
+                                     sensor_z, self.symmetric_slopes(tx, ty, distance_mm))
+        return -out[:, 0].reshape(shape), -out[:, 1].reshape(shape)
+
+    def _symmetric_points(self, k: np.ndarray) -> np.ndarray:
+        """
+        Return a point (lens frame) on the symmetric port's chief ray of each direction k.
+
+        At infinity: the meridional chief ray of the field angle acos(k_z) (aimed with
+        continuation over a ladder), turned to the direction's azimuth.
+
+        :param k: ``(N, 3)`` unit ray directions in the medium (lens frame).
+        :return: ``(N, 3)`` (NaN where the symmetric trace fails).
+        """
+        theta = np.arccos(np.clip(k[:, 2], -1.0, 1.0))
+        order = np.argsort(theta, kind='stable')
+        ladder = np.linspace(0.0, float(np.max(theta)), LADDER_SAMPLES)
+        _, offsets = trace_field_rays(self.combined, math.inf, self.image_plane(math.inf)[0],
+                                      ladder)
+        rays = aim_chief_rays(self.combined, math.inf, field_angle_rad=theta[order],
+                              guide=(ladder, offsets))
+        height = np.empty(theta.shape)
+        z = np.empty(theta.shape)
+        height[order], z[order] = rays.y, rays.z - self.shift_mm
+        # The meridional ray of a field above the axis runs down (k_y < 0): its azimuth is
+        # that of -k.
+        phi = np.arctan2(-k[:, 1], -k[:, 0])
+        return np.stack([height * np.cos(phi), height * np.sin(phi), z], axis=1)
 
     def symmetric_slopes(self, tx: FloatArray, ty: FloatArray,
                          distance_mm: float) -> np.ndarray:

@@ -28,12 +28,13 @@ import math
 from typing import Any, Mapping
 
 from mechdeconv_ros.lenses.lens_errors import (
-    FloatArray, is_prescription_mode, ModelError, scene_distance, stop_param)
+    FloatArray, is_prescription_mode, ModelError, stop_param)
 from mechdeconv_ros.optics import scene_constraints
 from mechdeconv_ros.optics.paraxial_rays import (
     entrance_pupil_scale, glass_elements, marginal_ray, paraxial_height)
 from mechdeconv_ros.optics.prescription import Prescription, Surface, vertex_z
 from mechdeconv_ros.optics.surfaces import domain_limit_mm, is_spherical, sag_at_height
+from mechdeconv_ros.schema.params import scene_distance
 
 
 #: f-numbers below this are accepted with a warning (few production lenses are faster).

@@ -48,6 +48,7 @@ from mechdeconv_ros.lenses.lens_source import FloatArray, ModelError, Prescripti
 from mechdeconv_ros.model.radial_map import hermite, RadialMap, resample, trace_angles
 from mechdeconv_ros.optics.glass import GlassError, lookup
 from mechdeconv_ros.optics.raytrace import trace_field_rays
+from mechdeconv_ros.schema.params import scene_distance
 import numpy as np
 
 
@@ -353,7 +354,7 @@ def trace_channels(model: ModelView) -> LateralColor:
     if not isinstance(base, TracedSource) and at_wavelength is None:
         raise ModelError(SWITCH, f'the {base.mode} lens source has no surfaces to trace at '
                                  'other wavelengths')
-    distance = _distance(values)
+    distance = scene_distance(values)
     v = model.image_distance_mm
     field = model.field_curve
     traces = []
@@ -376,11 +377,6 @@ def trace_channels(model: ModelView) -> LateralColor:
     trace_ms = (time.perf_counter() - start) * 1e3
     separation, where = _max_separation(model, traces)
     return LateralColor(tuple(traces), trace_ms, separation, where, focus)
-
-
-def _distance(values: Mapping[str, Any]) -> float:
-    distance = float(values['scene.distance_mm'])
-    return math.inf if distance == 0.0 else distance
 
 
 def _max_separation(model: ModelView, traces: list[ChannelTrace]

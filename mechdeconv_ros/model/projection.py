@@ -57,6 +57,7 @@ from mechdeconv_ros.lenses.lens_errors import FloatArray
 from mechdeconv_ros.lenses.port_source import PortedSource
 from mechdeconv_ros.model.radial_map import hermite, RadialMap
 from mechdeconv_ros.optics.pose import sensor_points, SensorPose
+from mechdeconv_ros.schema.params import scene_distance
 import numpy as np
 
 #: Newton iterations of the inverse projection (quadratic convergence from the untilted root).
@@ -123,11 +124,6 @@ def plane_offsets(height: FloatArray, slope: FloatArray, cos_phi: FloatArray,
     return a, b
 
 
-def _scene_distance(model: Any) -> float:
-    distance = float(model.values['scene.distance_mm'])
-    return distance if distance > 0.0 else math.inf
-
-
 def _traced_lines(model: Any, theta: FloatArray) -> tuple[FloatArray, FloatArray]:
     """
     Return the lines at ``theta``: interpolated inside the model's trace, traced beyond it.
@@ -145,7 +141,8 @@ def _traced_lines(model: Any, theta: FloatArray) -> tuple[FloatArray, FloatArray
     guide = None
     if field.aim_offsets is not None:
         guide = (field.field_angle_rad, field.aim_offsets)
-    heights, slopes, _ = model.source.chief_lines(theta[order], _scene_distance(model), guide)
+    heights, slopes, _ = model.source.chief_lines(theta[order], scene_distance(model.values),
+                                                  guide)
     heights, slopes = np.asarray(heights, dtype=np.float64), np.asarray(slopes, np.float64)
     # The field ends at the first failure or non-increase of the height past the trace.
     good = np.isfinite(heights) & np.isfinite(slopes)
@@ -205,9 +202,22 @@ def project_points(model: Any, tx: FloatArray, ty: FloatArray) -> tuple[FloatArr
     """
     tx, ty = np.broadcast_arrays(np.asarray(tx, dtype=float), np.asarray(ty, dtype=float))
     if is_exact_3d(model):
-        a, b = model.source.sensor_points(tx, ty, float(model.values['scene.distance_mm']))
-        return model.K[0, 2] + a / model.pixel_mm[0], model.K[1, 2] + b / model.pixel_mm[1]
+        return exact_pixels(model, np.stack([tx, ty, np.ones(tx.shape)], axis=-1))
     return project(model, tx, ty)
+
+
+def exact_pixels(model: Any, directions: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """
+    Return the raw pixels of scene directions traced exactly in 3-D through the model's port.
+
+    :param model: a model whose source is a :class:`PortedSource`.
+    :param directions: ``(..., 3)`` in the optical frame (X right, Y down, Z ahead); a finite
+        scene has none at Z <= 0 (NaN); a scene at infinity (``scene.distance_mm`` 0) is
+        traced at any angle to the axis.
+    :return: ``(u, v)``, NaN where no chief ray passes.
+    """
+    a, b = model.source.sensor_directions(directions, scene_distance(model.values))
+    return model.K[0, 2] + a / model.pixel_mm[0], model.K[1, 2] + b / model.pixel_mm[1]
 
 
 def pixel_rays(pose: SensorPose, u: FloatArray, v: FloatArray, axis: tuple[float, float],
@@ -343,10 +353,9 @@ def pixels_of(model: Any, directions: FloatArray) -> FloatArray:
         theta = np.arccos(z)
         phi = np.arctan2(d[..., 1], d[..., 0])
     if is_exact_3d(model):
-        with np.errstate(invalid='ignore', divide='ignore'):
-            tx = np.where(z > 0, d[..., 0] / d[..., 2], np.nan)
-            ty = np.where(z > 0, d[..., 1] / d[..., 2], np.nan)
-        u, v = project_points(model, tx, ty)
+        # Traced exactly in 3-D through the port, scene at scene.distance_mm (0: infinity,
+        # any angle; a finite scene plane has no point at z <= 0: NaN).
+        u, v = exact_pixels(model, d)
     else:
         u, v = project_angles(model, theta, phi)
     return np.stack([np.asarray(u, float), np.asarray(v, float)], axis=-1)

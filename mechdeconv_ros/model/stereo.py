@@ -47,11 +47,12 @@ from dataclasses import dataclass
 import math
 from typing import Any, Mapping
 
-from mechdeconv_ros.lenses.lens_errors import FloatArray, ModelError, scene_distance
+from mechdeconv_ros.lenses.lens_errors import FloatArray, ModelError
 from mechdeconv_ros.model.model import build_model, LensModel
 from mechdeconv_ros.model.projection import directions_of, pixels_of
 from mechdeconv_ros.optics.ports import entrance_pupil_z
 from mechdeconv_ros.optics.pose import rig_rotation
+from mechdeconv_ros.schema.params import scene_distance
 from mechdeconv_ros.schema.stereo_params import (
     check_stereo_values, RIG_PARAMS, split_values)
 import numpy as np

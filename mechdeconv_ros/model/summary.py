@@ -25,7 +25,7 @@ import math
 from types import SimpleNamespace
 from typing import Any, Callable, Mapping
 
-from mechdeconv_ros.lenses.lens_errors import finite_or_none, FloatArray, scene_distance
+from mechdeconv_ros.lenses.lens_errors import finite_or_none, FloatArray
 from mechdeconv_ros.lenses.lens_source import LensSource
 from mechdeconv_ros.model.projection import project_angles, unproject_angles
 from mechdeconv_ros.model.radial_map import COARSE_SAMPLES, field_cap_rad, trace_angles
@@ -33,6 +33,7 @@ from mechdeconv_ros.optics import scene_constraints
 from mechdeconv_ros.optics.pose import POSE_PARAMS, SensorPose
 from mechdeconv_ros.optics.raytrace import MAX_CONTINUATION_STEP_RAD
 from mechdeconv_ros.optics.thick_lens import propagate_sigma
+from mechdeconv_ros.schema.params import scene_distance
 import numpy as np
 
 

@@ -16,9 +16,13 @@ port or a decentred dome: each point's chief ray traced exactly in 3-D
 Remap (:func:`residual_maps`): exact per-pixel Newton over 1080p is too slow, so a non-symmetric
 port's maps are the symmetric port's (radial, exact to the curve's interpolation) plus a
 residual (exact 3-D pixel minus the radial one) traced on a RESIDUAL_GRID of output pixels
-(corners included) and carried to every pixel by a separable natural cubic spline; nodes
-without a ray (beyond the valid field) are filled harmonically from the others (Laplace), so
-the spline stays smooth up to the field's edge. Its error against the exact trace is measured by
+(corners included) and carried to every pixel by a separable natural cubic spline. A node's
+direction is the output projection's own (no angle clamped); nodes without a ray (beyond the
+valid field, past 90 deg on a finite scene plane) are filled harmonically from the others
+(Laplace), so the spline stays smooth elsewhere, and the pixels of every grid cell they are a
+corner of are masked (NaN: the remap leaves them outside) rather than given a made-up residual.
+A scene at infinity (``scene.distance_mm`` 0, :func:`mechdeconv_ros.schema.params.scene_distance`)
+is traced exactly too, direction by direction. Its error against the exact trace is measured by
 test/test_underwater.py (well under 0.05 px for 1 deg of tilt and 1 mm of decentring).
 
 Non-central error (:func:`noncentral_errors`): a camera behind a flat port has no single
@@ -41,8 +45,10 @@ from typing import Any
 
 from mechdeconv_ros.lenses.lens_errors import FloatArray
 from mechdeconv_ros.lenses.port_source import PortedSource
-from mechdeconv_ros.model.projection import is_exact_3d, project_points
+from mechdeconv_ros.model.projection import (  # noqa: F401 (re-exported)
+    exact_pixels, is_exact_3d, project_points)
 from mechdeconv_ros.optics.ports import entrance_pupil_z
+from mechdeconv_ros.schema.params import scene_distance
 import numpy as np
 
 #: The keys of the model report.
@@ -62,8 +68,8 @@ def noncentral_errors(model: Any) -> dict[str, float | None]:
         line is at infinity), NaN where a chief ray fails.
     """
     source = model.source
-    distance = float(model.values.get('scene.distance_mm', 0.0))
-    if not isinstance(source, PortedSource) or distance <= 0.0:
+    distance = scene_distance(model.values)
+    if not isinstance(source, PortedSource) or math.isinf(distance):
         return dict.fromkeys(KEYS)
     corner_u, corner_v = model.width - 1.0, model.height - 1.0
     dx = (corner_u - model.K[0, 2]) * model.pixel_mm[0]
@@ -130,21 +136,31 @@ def spline_weights(count: int, queries: FloatArray) -> FloatArray:
     return linear + cubic @ curvature
 
 
-def _ideal_tangents(model: Any, xn: FloatArray, yn: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Return (tx, ty) of normalised output coordinates in the output projection."""
+def ideal_directions(model: Any, xn: FloatArray, yn: FloatArray) -> FloatArray:
+    """
+    Return the unit scene directions of normalised output coordinates (output projection).
+
+    Pinhole: (xn, yn, 1). Equidistant: theta = hypot(xn, yn), past 90 deg too (no angle is
+    clamped: a direction the scene plane does not reach is NaN in the exact trace, not the
+    residual of another angle).
+
+    :return: ``(..., 3)``.
+    """
+    xn, yn = np.broadcast_arrays(np.asarray(xn, dtype=float), np.asarray(yn, dtype=float))
     if model.projection == 'pinhole':
-        return xn, yn
+        d = np.stack([xn, yn, np.ones(xn.shape)], axis=-1)
+        return d / np.linalg.norm(d, axis=-1, keepdims=True)
     theta = np.hypot(xn, yn)
     with np.errstate(invalid='ignore', divide='ignore'):
-        scale = np.where(theta > 0.0, np.tan(np.minimum(theta, 1.55)) / theta, 1.0)
-    return xn * scale, yn * scale
+        scale = np.where(theta > 0.0, np.sin(theta) / theta, 1.0)
+    return np.stack([xn * scale, yn * scale, np.cos(theta)], axis=-1)
 
 
 def residual_nodes(model: Any) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """
     Return the residual grid: node columns u, rows v (output px) and the residual (du, dv).
 
-    :return: ``(u_nodes, v_nodes, du, dv)``, du/dv ``(rows, cols)`` in raw px (0 where a
+    :return: ``(u_nodes, v_nodes, du, dv)``, du/dv ``(rows, cols)`` in raw px (NaN where a
         node has no ray).
     """
     cols, rows = RESIDUAL_GRID
@@ -153,11 +169,10 @@ def residual_nodes(model: Any) -> tuple[FloatArray, FloatArray, FloatArray, Floa
     xn = (u_nodes[None, :] - model.K_new[0, 2]) / model.K_new[0, 0]
     yn = (v_nodes[:, None] - model.K_new[1, 2]) / model.K_new[1, 1]
     xn, yn = np.broadcast_arrays(xn, yn)
-    tx, ty = _ideal_tangents(model, xn, yn)
-    exact_u, exact_v = project_points(model, tx, ty)
+    exact_u, exact_v = exact_pixels(model, ideal_directions(model, xn, yn))
     radial = model.raw_from_rect(np.stack([u_nodes[None, :] + 0.0 * yn,
                                            v_nodes[:, None] + 0.0 * xn], axis=-1))
-    return u_nodes, v_nodes, _filled(exact_u - radial[..., 0]), _filled(exact_v - radial[..., 1])
+    return u_nodes, v_nodes, exact_u - radial[..., 0], exact_v - radial[..., 1]
 
 
 def _filled(grid: FloatArray, sweeps: int = 400) -> FloatArray:
@@ -179,6 +194,11 @@ def residual_maps(model: Any) -> tuple[FloatArray, FloatArray] | None:
     """
     Return the residual (du, dv) of a non-symmetric port at every output pixel, or None.
 
+    A node without an exact ray (beyond a flat port's critical angle, past the scene plane's
+    90 deg) is filled harmonically so the spline stays smooth elsewhere, but every pixel of a
+    grid cell with such a corner is NaN (masked: the remap leaves it outside) rather than
+    given a made-up residual.
+
     :param model: the model.
     :return: two ``(out_height, out_width)`` float32 arrays; None for a symmetric port.
     """
@@ -187,10 +207,29 @@ def residual_maps(model: Any) -> tuple[FloatArray, FloatArray] | None:
     cached = model._lateral_cache.get('port_residual')
     if cached is None:
         u_nodes, v_nodes, du, dv = residual_nodes(model)
-        wu = spline_weights(u_nodes.size, np.arange(model.out_width) * (
-            (u_nodes.size - 1) / max(model.out_width - 1, 1)))
-        wv = spline_weights(v_nodes.size, np.arange(model.out_height) * (
-            (v_nodes.size - 1) / max(model.out_height - 1, 1)))
-        cached = ((wv @ du @ wu.T).astype(np.float32), (wv @ dv @ wu.T).astype(np.float32))
+        qu = np.arange(model.out_width) * ((u_nodes.size - 1) / max(model.out_width - 1, 1))
+        qv = np.arange(model.out_height) * ((v_nodes.size - 1) / max(model.out_height - 1, 1))
+        wu = spline_weights(u_nodes.size, qu)
+        wv = spline_weights(v_nodes.size, qv)
+        missing = ~(np.isfinite(du) & np.isfinite(dv))
+        masked = _cells_touching(missing, qu, qv)
+        out = []
+        for grid in (du, dv):
+            full = (wv @ _filled(grid) @ wu.T).astype(np.float32)
+            full[masked] = np.nan
+            out.append(full)
+        cached = (out[0], out[1])
         model._lateral_cache['port_residual'] = cached
     return cached
+
+
+def _cells_touching(missing: np.ndarray, qu: FloatArray, qv: FloatArray) -> np.ndarray:
+    """Return, per pixel (grid positions qu across, qv down), whether a cell corner is missing."""
+    if not missing.any():
+        return np.zeros((qv.size, qu.size), dtype=bool)
+    c0 = np.minimum(np.floor(qu).astype(int), missing.shape[1] - 1)
+    c1 = np.minimum(np.ceil(qu).astype(int), missing.shape[1] - 1)
+    r0 = np.minimum(np.floor(qv).astype(int), missing.shape[0] - 1)
+    r1 = np.minimum(np.ceil(qv).astype(int), missing.shape[0] - 1)
+    return (missing[r0][:, c0] | missing[r0][:, c1] | missing[r1][:, c0]
+            | missing[r1][:, c1])

@@ -60,6 +60,7 @@ from mechdeconv_ros.optics.prescription import image_plane, paraxial, Prescripti
 from mechdeconv_ros.optics.trace3d import (
     direction_from_cosines, FAILED, lens_system, reversed_system, System, trace_margin, trace_pass,
     trace_passes)
+from mechdeconv_ros.schema.params import scene_distance
 import numpy as np
 import numpy.typing as npt
 
@@ -325,8 +326,7 @@ def relative_illumination(model: Any, *, samples: int = RI_SAMPLES,
     """
     values = model.values
     radius, surface = stop_of(values)
-    distance = float(values['scene.distance_mm'])
-    distance = math.inf if distance == 0.0 else distance
+    distance = scene_distance(values)
     # The sensor's plane (lens.image_distance_mm may move it off the paraxial image plane).
     sensor_z, _ = model.source.image_plane(distance)
     system = backward_system(model.prescription, radius, surface, sensor_z,
@@ -592,11 +592,11 @@ def lensfun_fit(model: Any, illumination: Illumination | None = None,
     basis = np.stack([r2, r2 * r2, r2 * r2 * r2], axis=1)
     k, *_ = np.linalg.lstsq(basis, ri - 1.0, rcond=None)
     error = float(np.max(np.abs(1.0 + basis @ k - ri))) * 100.0
-    distance = float(model.values['scene.distance_mm'])
+    distance = scene_distance(model.values)
     summary = model.summary
     return LensfunFit(float(k[0]), float(k[1]), float(k[2]), error,
                       float(model.focal_length_mm), float(summary['f_number']),
-                      distance / 1000.0 if distance > 0 else LENSFUN_INFINITY_M, reach)
+                      LENSFUN_INFINITY_M if math.isinf(distance) else distance / 1000.0, reach)
 
 
 def stop_flux(prescription: Prescription, stop_radius_mm: float, stop_surface: int | None,

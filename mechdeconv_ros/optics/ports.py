@@ -31,7 +31,18 @@ rays in 3-D: the scene point P, in the medium, sends the ray P + s k (k unit) th
 (:mod:`mechdeconv_ros.optics.trace3d`); the chief ray is the one crossing the stop plane at
 its centre, found by a 2-D Newton on the direction's (k_x / k_z, k_y / k_z) with a
 finite-difference Jacobian, started from the symmetric port's chief ray (or the line toward
-the stop centre) and converged to 1e-10 mm at the stop.
+the stop centre) and converged to 1e-10 mm at the stop. A start that the port stops (a tilted
+port reflects totally where the symmetric one did not) is continued: aimed through the port
+with 0, 1/4, 1/2, 3/4 of its tilt and decentring first. The chief ray is clipped by the lens's
+edges, not by its clear semi-diameters (it stands for the beam's centre). A scene point must
+lie in the water (:func:`in_medium`): in front of the flat port's outer plane, outside the
+dome's outer sphere; a ray is never traced backwards to the port.
+
+A scene at infinity (:func:`trace_scene_directions`): a direction has an exact image through
+any port. Its rays are parallel in the medium (unit k); the chief ray is the one through the
+stop centre, found by the same Newton on the ray's offset (u_1, u_2) square to k from a point
+on the axis, O + u_1 e_1 + u_2 e_2 (e_1, e_2 an orthonormal basis square to k), which holds
+at any angle of k to the axis.
 """
 
 from __future__ import annotations
@@ -141,9 +152,16 @@ def _unit(kx: np.ndarray, ky: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nd
 
 
 def _through_port(port: Port, medium_index: float, p: tuple[np.ndarray, ...],
-                  k: tuple[np.ndarray, ...]) -> tuple[tuple[np.ndarray, ...],
-                                                      tuple[np.ndarray, ...]]:
-    """Refract rays from the medium through both faces of the port into air (NaN: failed)."""
+                  k: tuple[np.ndarray, ...], *, forward: bool = True
+                  ) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
+    """
+    Refract rays from the medium through both faces of the port into air (NaN: failed).
+
+    With ``forward`` the ray must travel forward (s >= 0) from its start to the outer face: a
+    start behind the flat port's outer plane or inside the dome's outer sphere is in the
+    housing, not in the water, and fails instead of being traced backwards. Without it the
+    start is any point of the ray's line (a scene at infinity).
+    """
     x, y, z = p
     kx, ky, kz = k
     indices = ((medium_index, port.index), (port.index, 1.0))
@@ -151,25 +169,113 @@ def _through_port(port: Port, medium_index: float, p: tuple[np.ndarray, ...],
         if port.kind == 'flat':
             n = port.normal()
             anchor = np.array([0.0, 0.0, -port.distance_mm])
-            for offset, (n0, n1) in zip((port.thickness_mm, 0.0), indices):
+            for face, (offset, (n0, n1)) in enumerate(zip((port.thickness_mm, 0.0), indices)):
                 q = anchor - offset * n
                 s = ((q[0] - x) * n[0] + (q[1] - y) * n[1] + (q[2] - z) * n[2]) / (
                     kx * n[0] + ky * n[1] + kz * n[2])
+                if face == 0 and forward:
+                    s = np.where(s >= 0.0, s, np.nan)
                 x, y, z = x + s * kx, y + s * ky, z + s * kz
                 kx, ky, kz = refract(kx, ky, kz, n[0], n[1], n[2], n0, n1)
             return (x, y, z), (kx, ky, kz)
         c = (port.decenter_x_mm, port.decenter_y_mm, port.center_z_mm)
-        for radius, (n0, n1) in zip((port.radius_mm + port.thickness_mm, port.radius_mm),
-                                    indices):
+        for face, (radius, (n0, n1)) in enumerate(
+                zip((port.radius_mm + port.thickness_mm, port.radius_mm), indices)):
             dx, dy, dz = x - c[0], y - c[1], z - c[2]
             b = dx * kx + dy * ky + dz * kz
             cc = dx * dx + dy * dy + dz * dz - radius * radius
-            # The near intersection from outside the sphere (the ray enters it).
+            # The near intersection of the line (where it enters the sphere).
             s = -b - np.sqrt(b * b - cc)
+            if face == 0 and forward:
+                s = np.where(s >= 0.0, s, np.nan)
             x, y, z = x + s * kx, y + s * ky, z + s * kz
             nx, ny, nz = (c[0] - x) / radius, (c[1] - y) / radius, (c[2] - z) / radius
             kx, ky, kz = refract(kx, ky, kz, nx, ny, nz, n0, n1)
         return (x, y, z), (kx, ky, kz)
+
+
+def in_medium(port: Port, points: np.ndarray) -> np.ndarray:
+    """
+    Return where scene points lie in the water, in front of the port's outer face.
+
+    Flat: on the scene's side of the (tilted) outer plane. Dome: outside the outer sphere and
+    in front of its centre's plane square to the axis (the dome's cap faces the scene).
+
+    :param port: the port.
+    :param points: ``(N, 3)`` points, lens frame.
+    :return: ``(N,)`` booleans.
+    """
+    pts = np.asarray(points, dtype=float).reshape(-1, 3)
+    if port.kind == 'flat':
+        n = port.normal()
+        outer = np.array([0.0, 0.0, -port.distance_mm]) - port.thickness_mm * n
+        return (pts - outer) @ n < 0.0
+    c = np.array([port.decenter_x_mm, port.decenter_y_mm, port.center_z_mm])
+    reach = np.linalg.norm(pts - c, axis=1)
+    return (reach > port.radius_mm + port.thickness_mm) & (pts[:, 2] < c[2])
+
+
+def orthonormal_basis(k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Return two unit vectors square to each unit vector k and to each other (any k).
+
+    Duff et al., "Building an orthonormal basis, revisited", JCGT 6(1), 2017.
+
+    :param k: ``(N, 3)`` unit vectors.
+    :return: ``(e1, e2)``, each ``(N, 3)``.
+    """
+    x, y, z = k[:, 0], k[:, 1], k[:, 2]
+    sign = np.where(z >= 0.0, 1.0, -1.0)
+    a = -1.0 / (sign + z)
+    b = x * y * a
+    e1 = np.stack([1.0 + sign * x * x * a, sign * b, -sign * x], axis=1)
+    e2 = np.stack([b, sign + y * y * a, -y], axis=1)
+    return e1, e2
+
+
+class _Launch:
+    """
+    The rays whose aiming unknowns are ``u`` (N, 2): from scene points or at infinity.
+
+    A scene point P: the ray P + s k, u = (k_x / k_z, k_y / k_z). A scene at infinity, the
+    direction k fixed: the ray through O + u_1 e_1 + u_2 e_2 (O on the axis, e_1, e_2 square
+    to k: :func:`orthonormal_basis`), any point of its line.
+    """
+
+    def __init__(self, points: np.ndarray | None, directions: np.ndarray | None,
+                 origin_z_mm: float = 0.0) -> None:
+        self.points = points
+        self.directions = directions
+        self.origin = np.array([0.0, 0.0, origin_z_mm])
+        if directions is not None:
+            self.e1, self.e2 = orthonormal_basis(directions)
+            # Unknowns in mm: the finite-difference step moves the ray 1e-7 mm.
+            self.eps = np.full((directions.shape[0], 1), 1e-7)
+        else:
+            # Unknowns are slopes: a step of 1e-7 moves the ray at the pupil by 1e-7 times
+            # the point's distance, so far points (1e6 mm and beyond) get a smaller step.
+            reach = np.abs(origin_z_mm - points[:, 2])
+            with np.errstate(**_ERRSTATE):
+                self.eps = (1e-7 * np.minimum(1.0, 1e3 / reach))[:, None]
+            self.eps[~np.isfinite(self.eps)] = 1e-7
+
+    def rays(self, rows: np.ndarray, u: np.ndarray) -> tuple[tuple[np.ndarray, ...], ...]:
+        """Return the starting points and directions of the given rows at unknowns ``u``."""
+        if self.directions is None:
+            pts = self.points[rows]
+            return (pts[:, 0], pts[:, 1], pts[:, 2]), _unit(u[:, 0], u[:, 1])
+        k = self.directions[rows]
+        p = self.origin + u[:, :1] * self.e1[rows] + u[:, 1:] * self.e2[rows]
+        return (p[:, 0], p[:, 1], p[:, 2]), (k[:, 0], k[:, 1], k[:, 2])
+
+    def unknowns(self, rows: np.ndarray, p: np.ndarray, k: np.ndarray) -> np.ndarray:
+        """Return the unknowns of rays (p, k) (N, 3 each): the aiming's start."""
+        if self.directions is None:
+            with np.errstate(**_ERRSTATE):
+                return np.stack([k[:, 0] / k[:, 2], k[:, 1] / k[:, 2]], axis=1)
+        rel = p - self.origin
+        return np.stack([np.sum(rel * self.e1[rows], axis=1),
+                         np.sum(rel * self.e2[rows], axis=1)], axis=1)
 
 
 def trace_scene_points(lens: Prescription, port: Port, medium_index: float,
@@ -179,10 +285,16 @@ def trace_scene_points(lens: Prescription, port: Port, medium_index: float,
     """
     Return where the chief rays of scene points cross the sensor plane (exact, 3-D).
 
+    A point not in the water (behind the port's outer face, :func:`in_medium`) has no ray.
+    The chief ray is not clipped by the lens's clear semi-diameters (only by its edges): it
+    stands for the beam's centre, and a beam whose centre passes just outside a clear
+    aperture still forms an image (the meridional trace's semi-diameters were set on the
+    symmetric chief rays; a tilt or decentring moves them by microns).
+
     :param lens: the lens in air (its frame: first vertex at z = 0).
     :param port: the port (tilted, decentred or not).
     :param medium_index: n of the scene's medium.
-    :param points: ``(N, 3)`` scene points x, y, z (lens frame, z < the port).
+    :param points: ``(N, 3)`` scene points x, y, z (lens frame, in front of the port).
     :param sensor_z_mm: z of the sensor plane (lens frame).
     :param start: ``(N, 2)`` starting slopes (k_x / k_z, k_y / k_z) of the aiming; default
         the line toward the paraxial entrance pupil.
@@ -191,9 +303,6 @@ def trace_scene_points(lens: Prescription, port: Port, medium_index: float,
         ray passes; with ``with_slopes``, also the ``(N, 2)`` slopes (k_x / k_z, k_y / k_z).
     """
     pts = np.asarray(points, dtype=float).reshape(-1, 3)
-    system = lens_system(lens, 0.0, stop_surface=None)
-    z_stop = float(lens.stop_z_mm)
-
     if start is None:
         z_e = entrance_pupil_z(lens)
         with np.errstate(**_ERRSTATE):
@@ -201,18 +310,114 @@ def trace_scene_points(lens: Prescription, port: Port, medium_index: float,
                               axis=1)
     else:
         slopes = np.array(start, dtype=float).reshape(-1, 2)
-    stop_system = _prefix(system, z_stop)
-    value = _stop_xy(port, medium_index, pts, slopes, stop_system)
-    eps = 1e-7
+    launch = _Launch(pts, None, entrance_pupil_z(lens))
+    out, slopes = _chief_rays(lens, port, medium_index, launch, sensor_z_mm, slopes)
+    out[~in_medium(port, pts)] = np.nan
+    return (out, slopes) if with_slopes else out
+
+
+def trace_scene_directions(lens: Prescription, port: Port, medium_index: float,
+                           directions: np.ndarray, sensor_z_mm: float,
+                           start: np.ndarray | None = None) -> np.ndarray:
+    """
+    Return where the chief rays of a scene at infinity cross the sensor plane (exact, 3-D).
+
+    A direction at infinity has an exact image through any port: its rays are parallel in
+    the medium (direction k), and the chief ray is the one of them that crosses the stop's
+    centre; the aiming moves the ray square to k (2-D Newton) instead of turning it.
+
+    :param lens: the lens in air (its frame: first vertex at z = 0).
+    :param port: the port (tilted, decentred or not).
+    :param medium_index: n of the scene's medium.
+    :param directions: ``(N, 3)`` unit directions of the rays in the medium, travelling
+        toward the lens (lens frame: a scene direction (X, Y, Z) of the optical frame is the
+        ray direction (-X, -Y, Z)).
+    :param sensor_z_mm: z of the sensor plane (lens frame).
+    :param start: ``(N, 3)`` a point on each starting ray (the symmetric port's chief ray);
+        default the line through the lens's paraxial entrance pupil.
+    :return: ``(N, 2)`` physical x, y on the sensor (mm; inverted image), NaN where no chief
+        ray passes.
+    """
+    k = np.asarray(directions, dtype=float).reshape(-1, 3)
+    k = k / np.linalg.norm(k, axis=1, keepdims=True)
+    launch = _Launch(None, k, entrance_pupil_z(lens))
+    rows = np.arange(k.shape[0])
+    if start is None:
+        u = np.zeros((k.shape[0], 2))
+    else:
+        u = launch.unknowns(rows, np.asarray(start, dtype=float).reshape(-1, 3), k)
+    out, _ = _chief_rays(lens, port, medium_index, launch, sensor_z_mm, u)
+    return out
+
+
+def _chief_rays(lens: Prescription, port: Port, medium_index: float, launch: _Launch,
+                sensor_z_mm: float, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Aim the rays of ``launch`` at the stop centre and trace them to the sensor.
+
+    A start whose ray fails (a tilted port's total reflection near the critical angle, where
+    the symmetric port's chief ray is reflected but the tilted one's is not) is continued:
+    aimed through the port with a quarter, half, three quarters of its tilt and decentring,
+    each solution starting the next.
+
+    :return: ``(N, 2)`` sensor x, y (NaN where none passes) and the unknowns.
+    """
+    system = lens_system(lens, 0.0, stop_surface=None).without_semi_diameters()
+    stop_system = _prefix(system, float(lens.stop_z_mm))
+    rows = np.arange(u.shape[0])
+    u = np.array(u, dtype=float)
+    value = _stop_xy(port, medium_index, launch, rows, u, stop_system)
+    failed = rows[~np.isfinite(value).all(axis=1)]
+    if failed.size and not port.symmetric:
+        for fraction in (0.0, 0.25, 0.5, 0.75):
+            part = _scaled(port, fraction)
+            u_f, v_f, ok = _newton(part, medium_index, launch, failed, u[failed],
+                                   _stop_xy(part, medium_index, launch, failed, u[failed],
+                                            stop_system), stop_system)
+            u[failed[ok]] = u_f[ok]
+        value[failed] = _stop_xy(port, medium_index, launch, failed, u[failed], stop_system)
+    u, value, ok = _newton(port, medium_index, launch, rows, u, value, stop_system)
+    p, k = launch.rays(rows, u)
+    forward = launch.directions is None
+    p, k = _through_port(port, medium_index, p, k, forward=forward)
+    passed, (x, y, z, kx, ky, kz) = trace_pass(system, *p, *k)
+    with np.errstate(**_ERRSTATE):
+        s = (sensor_z_mm - z) / kz
+        out = np.stack([x + s * kx, y + s * ky], axis=1)
+    out[~(ok & passed & (kz > 0))] = np.nan
+    return out, u
+
+
+def _scaled(port: Port, fraction: float) -> Port:
+    """Return the port with its tilts and decentring scaled by ``fraction``."""
+    return replace(port, tilt_x_rad=fraction * port.tilt_x_rad,
+                   tilt_y_rad=fraction * port.tilt_y_rad,
+                   decenter_x_mm=fraction * port.decenter_x_mm,
+                   decenter_y_mm=fraction * port.decenter_y_mm)
+
+
+def _newton(port: Port, medium_index: float, launch: _Launch, rows: np.ndarray,
+            u: np.ndarray, value: np.ndarray, stop_system: System
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Return the unknowns that put the rays on the stop centre, the miss and which converged.
+
+    2-D Newton, finite-difference Jacobian, backtracking (halving) while the miss grows.
+    """
+    u, value = np.array(u, dtype=float), np.array(value, dtype=float)
     active = np.isfinite(value).all(axis=1)
     for _ in range(MAX_ITERATIONS):
         err = np.hypot(value[:, 0], value[:, 1])
         todo = np.flatnonzero(active & (err > STOP_TOLERANCE_MM))
         if todo.size == 0:
             break
-        s0 = slopes[todo]
-        fx = _stop_xy(port, medium_index, pts[todo], s0 + [eps, 0.0], stop_system)
-        fy = _stop_xy(port, medium_index, pts[todo], s0 + [0.0, eps], stop_system)
+        s0 = u[todo]
+        eps = launch.eps[rows[todo]]
+        zero = np.zeros_like(eps)
+        fx = _stop_xy(port, medium_index, launch, rows[todo], s0 + np.hstack([eps, zero]),
+                      stop_system)
+        fy = _stop_xy(port, medium_index, launch, rows[todo], s0 + np.hstack([zero, eps]),
+                      stop_system)
         j = np.stack([(fx - value[todo]) / eps, (fy - value[todo]) / eps], axis=2)
         with np.errstate(**_ERRSTATE):
             det = j[:, 0, 0] * j[:, 1, 1] - j[:, 0, 1] * j[:, 1, 0]
@@ -223,26 +428,20 @@ def trace_scene_points(lens: Prescription, port: Port, medium_index: float,
         pending = np.arange(todo.size)
         for _ in range(12):
             trial = s0[pending] - lam[pending, None] * step[pending]
-            new = _stop_xy(port, medium_index, pts[todo[pending]], trial, stop_system)
+            new = _stop_xy(port, medium_index, launch, rows[todo[pending]], trial, stop_system)
             good = np.isfinite(new).all(axis=1) & (
                 np.hypot(new[:, 0], new[:, 1]) < err[todo[pending]])
-            slopes[todo[pending[good]]] = trial[good]
+            u[todo[pending[good]]] = trial[good]
             value[todo[pending[good]]] = new[good]
             lam[pending[~good]] *= 0.5
             pending = pending[~good]
             if pending.size == 0:
                 break
         active[todo[pending]] = False
+    # A ray that stalled below 1e3 x the tolerance (a far point's slope has no more digits)
+    # has converged as far as doubles allow.
     err = np.hypot(value[:, 0], value[:, 1])
-    ok = active & (err <= 1e3 * STOP_TOLERANCE_MM)
-    kx, ky, kz = _unit(slopes[:, 0], slopes[:, 1])
-    p, k = _through_port(port, medium_index, (pts[:, 0], pts[:, 1], pts[:, 2]), (kx, ky, kz))
-    passed, (x, y, z, kx, ky, kz) = trace_pass(system, *p, *k)
-    with np.errstate(**_ERRSTATE):
-        s = (sensor_z_mm - z) / kz
-        out = np.stack([x + s * kx, y + s * ky], axis=1)
-    out[~(ok & passed & (kz > 0))] = np.nan
-    return (out, slopes) if with_slopes else out
+    return u, value, err <= 1e3 * STOP_TOLERANCE_MM
 
 
 def _prefix(system: System, z_stop: float) -> System:
@@ -255,11 +454,11 @@ def _prefix(system: System, z_stop: float) -> System:
     return System(tuple(elements))
 
 
-def _stop_xy(port: Port, medium_index: float, pts: np.ndarray, slopes: np.ndarray,
-             stop_system: System) -> np.ndarray:
-    """Return (x, y) where the rays of ``slopes`` cross the stop plane (NaN: failed)."""
-    kx, ky, kz = _unit(slopes[:, 0], slopes[:, 1])
-    p, k = _through_port(port, medium_index, (pts[:, 0], pts[:, 1], pts[:, 2]), (kx, ky, kz))
+def _stop_xy(port: Port, medium_index: float, launch: _Launch, rows: np.ndarray,
+             u: np.ndarray, stop_system: System) -> np.ndarray:
+    """Return (x, y) where the rays of unknowns ``u`` cross the stop plane (NaN: failed)."""
+    p, k = launch.rays(rows, u)
+    p, k = _through_port(port, medium_index, p, k, forward=launch.directions is None)
     stop = stop_system.elements[-1]
     if len(stop_system.elements) > 1:
         passed, (x, y, z, kx, ky, kz) = trace_pass(System(stop_system.elements[:-1]), *p, *k)

@@ -148,7 +148,8 @@ UNDERWATER_SPECS: tuple[ParamSpec, ...] = (
        'Temperature of the water; 0-30 degC (the range of the formula).', -1.0e3, 1.0e3),
     _d('scene.medium_index', 0.0, '1',
        'Index of the medium of the scene relative to air at every wavelength (overrides '
-       'the formula of scene.medium: no dispersion); 0 = from scene.medium. Below 1 is refused.',
+       'the formula of scene.medium: no dispersion); 0 = from scene.medium; 1 = air, as '
+       'scene.medium air. Below 1 is refused.',
        0.0, 4.0),
     ParamSpec('port.type', 'string', 'none', '',
               'Window in front of the lens: none, flat (a plane-parallel plate) or dome (a '
@@ -437,6 +438,45 @@ def defaults() -> dict[str, ParamValue]:
     """
     return {spec.name: (list(spec.default) if isinstance(spec.default, list) else spec.default)
             for spec in SCHEMA}
+
+
+def scene_distance(values: Mapping[str, Any]) -> float:
+    """
+    Return the scene distance l from H in mm: ``math.inf`` for ``scene.distance_mm`` = 0.
+
+    The one reading of the parameter's sentinel (0 = infinity): every module that needs l
+    calls this (or :func:`distance_from_setting`) instead of comparing with 0 itself.
+
+    :param values: parameter values (``scene.distance_mm`` missing: infinity).
+    :return: l, > 0 (``math.inf`` for a scene at infinity).
+    """
+    return distance_from_setting(float(values.get('scene.distance_mm', 0.0)))
+
+
+def distance_from_setting(distance_mm: float) -> float:
+    """
+    Return l (mm) of a ``scene.distance_mm`` setting: 0 (or below, never valid) is infinity.
+
+    :param distance_mm: the parameter's value.
+    :return: l, ``math.inf`` for the sentinel.
+    """
+    return math.inf if not distance_mm > 0.0 else float(distance_mm)
+
+
+def scene_in_air(values: Mapping[str, Any]) -> bool:
+    """
+    Return True when the scene's medium is air: ``scene.medium_index`` 1, or 0 and air.
+
+    ``scene.medium_index`` > 0 overrides ``scene.medium``; 1.0 is air written out (no port
+    path, no refraction at a medium), anything else a medium (below 1 is then refused).
+
+    :param values: parameter values.
+    :return: whether the scene is in air.
+    """
+    given = float(values.get('scene.medium_index', 0.0))
+    if given > 0.0:
+        return given == 1.0
+    return str(values.get('scene.medium', 'air')) == 'air'
 
 
 def _is_real(value: Any) -> bool:
