@@ -192,3 +192,42 @@ def test_a_child_stopped_by_another_hand_is_continued_and_stop_is_prompt(fisheye
         session.stop()
     assert not session._thread.is_alive()
     assert process.returncode is not None      # ended and reaped
+
+
+def test_a_stuck_child_is_reported_and_restarted(fisheye: Any) -> None:
+    """
+    Issue 36 (a): a child that never answers (kept stopped by another hand).
+
+    Caught: the check's thread waited for its reply forever and /diagnostics kept saying
+    nothing; now it is stopped, ``check_state`` says why, and a new child checks.
+    """
+    values = config('fisheye.yaml', check__rate_hz=20.0, check__max_load=1.0,
+                    check__window=1, check__apply=False)
+    record = SimpleNamespace(model=fisheye, revision=1, values_generation=0)
+    session = CheckSession(values.__getitem__, lambda: record, {}, lambda *a: None,
+                           lambda: None)
+    session.reply_timeout_s = session.send_timeout_s = 0.5
+    frame = np.zeros((fisheye.out_height, fisheye.out_width), np.uint8)
+    session.start()
+    try:
+        assert wait_for(lambda: session.worker_pid is not None, 30.0)
+        stuck = session.worker_pid
+
+        def hold() -> None:        # keeps stopping it, as a debugger or a frozen cgroup would
+            try:
+                os.kill(stuck, signal.SIGSTOP)
+            except ProcessLookupError:
+                pass
+        assert wait_for(lambda: session.entries()['check_state'].startswith('restarting'),
+                        every=lambda: (hold(), session.offer(frame, fisheye)))
+        session.reply_timeout_s = session.send_timeout_s = 60.0    # a new child imports first
+        state = session.entries()['check_state']
+        assert 'did not answer' in state or 'took no request' in state, state
+        assert session.restarts == 1
+        assert wait_for(lambda: session.worker_pid not in (None, stuck), 30.0)
+        checks = session.entries()['checks']
+        assert wait_for(lambda: session.entries()['checks'] > checks,
+                        every=lambda: session.offer(frame, fisheye))
+        assert session.entries()['check_state'] == 'on'
+    finally:
+        session.stop()

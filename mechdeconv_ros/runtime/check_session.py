@@ -63,7 +63,8 @@ from typing import Any, Callable, Mapping
 from mechdeconv_ros.imaging.plumb_check import CheckResult, ESTIMATED, to_apply
 from mechdeconv_ros.model.underwater import is_exact_3d
 from mechdeconv_ros.runtime.check_gate import LoadGate
-from mechdeconv_ros.runtime.check_worker import CheckWorker, WorkerGone, WorkerStuck
+from mechdeconv_ros.runtime.check_worker import (
+    CheckWorker, REPLY_TIMEOUT_S, SEND_TIMEOUT_S, WorkerGone, WorkerStuck)
 from mechdeconv_ros.schema.params import MECHANISMS
 import numpy as np
 
@@ -171,6 +172,9 @@ class CheckSession:
         self._logged: dict[str, float] = {}
         self.checks = 0
         self.applied_sets = 0
+        #: Seconds of the child running without a reply, and of a request's send, after
+        #: which it is stuck.
+        self.reply_timeout_s, self.send_timeout_s = REPLY_TIMEOUT_S, SEND_TIMEOUT_S
         self._thread = threading.Thread(target=self._run, name='check', daemon=True)
 
     # -- the node's side -----------------------------------------------------------------------
@@ -411,7 +415,9 @@ class CheckSession:
         try:
             return self._worker.check(frame, model, current, int(self._value('check.window')),
                                       float(self._value('check.max_rms_px')),
-                                      waiting=self._pause_for_load, poll_s=LOAD_POLL_S)
+                                      waiting=self._pause_for_load, poll_s=LOAD_POLL_S,
+                                      reply_timeout_s=self.reply_timeout_s,
+                                      send_timeout_s=self.send_timeout_s)
         except WorkerGone as err:
             # A child ended during the node's stop (or by a signal to its session) is not
             # a death to log; a stuck one is.

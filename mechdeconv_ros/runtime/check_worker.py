@@ -246,8 +246,8 @@ class CheckWorker:
 
     def check(self, frame: np.ndarray, model: Any, current: Any, window: int,
               max_rms_px: float, waiting: Callable[[], None] | None = None,
-              poll_s: float = 0.25, reply_timeout_s: float = REPLY_TIMEOUT_S
-              ) -> dict[str, Any]:
+              poll_s: float = 0.25, reply_timeout_s: float = REPLY_TIMEOUT_S,
+              send_timeout_s: float = SEND_TIMEOUT_S) -> dict[str, Any]:
         """
         Check a frame in the child; block (the interpreter lock released) until it replies.
 
@@ -264,6 +264,7 @@ class CheckWorker:
         :param poll_s: seconds between calls of ``waiting``.
         :param reply_timeout_s: seconds of the child running (not paused) without a reply
             after which it is stuck.
+        :param send_timeout_s: seconds the request's send may take.
         :return: the reply (module docstring).
         :raises WorkerStuck: if the send or the reply did not come in time (the child is
             still there: stop it).
@@ -281,7 +282,7 @@ class CheckWorker:
                   'window': int(window), 'max_rms_px': float(max_rms_px)}
         try:
             self.resume()
-            deadline = time.monotonic() + SEND_TIMEOUT_S
+            deadline = time.monotonic() + send_timeout_s
             self._send(pickle.dumps(header, pickle.HIGHEST_PROTOCOL), deadline)
             self._send(frame.reshape(-1).view(np.uint8), deadline)     # flat: bytes, not rows
             self._held = tokens
@@ -317,8 +318,8 @@ class CheckWorker:
                 except BlockingIOError:
                     left = deadline - time.monotonic()
                     if left <= 0.0 or not select.select([], [self._sock], [], left)[1]:
-                        raise WorkerStuck(f'the check process took no request in '
-                                          f'{SEND_TIMEOUT_S:.0f} s') from None
+                        raise WorkerStuck('the check process took no request in time'
+                                          ) from None
 
     def _wait_for_reply(self, waiting: Callable[[], None] | None, poll_s: float,
                         timeout_s: float) -> None:
