@@ -70,7 +70,7 @@ def test_a_user_set_moves_the_apply_bounds_and_wins_over_an_older_judgement() ->
     tolerances of the start-up value; and an apply judged on the values before a user's set
     was made after it (the user's set, reported successful, was lost).
     """
-    values = config('fisheye.yaml')
+    values = config('fisheye.yaml', check__apply=True)
     start, tol = float(values[X]), float(values['sensor.tolerance.axis_offset_x_mm'])
     logs: list[str] = []
     requests: list[int] = []
@@ -94,6 +94,9 @@ def test_a_user_set_moves_the_apply_bounds_and_wins_over_an_older_judgement() ->
     session.plan_apply(off_result(far, tol), SimpleNamespace(values=dict(values)), 4)
     assert session.take_apply(5) is None
     assert 'not applied' in logs[-1]
+    session.plan_apply(off_result(far, tol), SimpleNamespace(values=dict(values)), 5)
+    values['check.apply'] = False       # switched off since: nothing is set
+    assert session.take_apply(5) is None
     session.applied({X: user}, False, 'refused for a reason')
     assert session.applied_sets == 0 and 'refused for a reason' in logs[-1]
 
@@ -162,6 +165,8 @@ def test_no_child_for_a_lens_the_check_cannot_judge() -> None:
         session.offer(np.zeros((4, 4), np.uint8), None)
         assert session._pending is None and session.worker_pid is None
         assert psutil.Process().children() == children
+        values['lens.zoom.joint'] = ''      # no longer moving: the check is on again
+        assert wait_for(lambda: session.entries()['check_state'] == 'on', 10.0)
     finally:
         session.stop()
 

@@ -276,7 +276,7 @@ class CheckSession:
         """
         with self._lock:
             pending, self._apply = self._apply, None
-        if pending is None:
+        if pending is None or not bool(self._value('check.apply')):
             return None
         changes, judged = pending
         if generation != judged:
@@ -359,7 +359,8 @@ class CheckSession:
             self._wake.clear()
             with self._lock:
                 pending, self._pending = self._pending, None
-            if pending is None:
+            if pending is None or not self._idle_look():    # a set may have changed either
+                self._busy = False
                 continue
             try:
                 self._check(*pending)
@@ -382,6 +383,9 @@ class CheckSession:
         self._blocked = reason is not None
         rate = float(self._value('check.rate_hz'))
         if reason is None and rate > 0.0:
+            with self._lock:
+                if self._state.startswith(('off', 'not checked')):
+                    self._state = STATE_ON
             return True
         if reason is not None:
             self._set_state(reason)
