@@ -95,7 +95,10 @@ class CheckThread:
         try:
             outcome = self._node.set_parameters_atomically(
                 [Parameter(name, Parameter.Type.DOUBLE, v) for name, v in changes.items()])
+            successful, reason = outcome.successful, outcome.reason
+        except Exception as err:    # noqa: B902 - an executor callback must never raise
+            successful, reason = False, repr(err)
         finally:
             self._applying = False
         self._live.start_requested_rebuild()    # what the services do after a request
-        self.session.applied(changes, outcome.successful, outcome.reason)
+        self.session.applied(changes, successful, reason)
