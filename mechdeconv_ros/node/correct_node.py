@@ -104,13 +104,11 @@ class CorrectNode(Node):
         self._compressed_wanted = False     # image_rect/compressed has a subscriber
         self._stage_clock = stage_clock_from_env()    # None unless MECHDECONV_STAGE_TIMES is set
         super().__init__('correct_node', **kwargs)
-        # How each model's maps are built (static, moving, colour, gain) and logged.
-        self._maps = ModelMaps(log_function(self))
+        self._maps = ModelMaps(log_function(self))    # how each model's maps are built
         self._live = LiveModel(
             declare_schema(self, SCHEMA), extras=camera_infos_from_model, log=log_function(self),
             build_maps=self._maps.build)
-        # Issue 19: lens_state (JointState) while a lens.zoom/focus joint moves gaps.
-        self._follower = LensFollower(self, self._stats)
+        self._follower = LensFollower(self, self._stats)    # issue 19: lens_state (JointState)
         self._follower.configure(self._live.values())
         guard_parameter_services(self, self._live.start_requested_rebuild,
                                  bool(kwargs.get('allow_undeclared_parameters', False)))
@@ -124,11 +122,8 @@ class CorrectNode(Node):
         self._pub_diag, self._outputs, events = create_outputs(self, self._update_subscription)
         self._pub_image, self._pub_info, self._pub_info_rect, self._pub_compressed = \
             self._outputs
-        # The check reads the model frames use now; its result is rebound whole (diagnostics).
-        self._check = CheckThread(
-            self, self._live.value, lambda: getattr(self._live.status().active, 'model', None),
-            lambda entries: setattr(self._stats, 'check', entries), self._stats.extra)
-        self._check.start()
+        self._check = CheckThread(self, self._live, self._stats.extra, log_function(self))
+        self._check.start()     # its apply is set on this executor (check_thread.py)
         self._rebuild_trigger = self.create_guard_condition(self._live.start_requested_rebuild)
         self._live.start()
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -136,9 +131,7 @@ class CorrectNode(Node):
         self._update_subscription()
         if not events:
             self.create_timer(LAZY_POLL_S, self._update_subscription)
-        self.create_timer(DIAGNOSTICS_PERIOD_S, lambda: publish_diagnostics(
-            self, self._pub_diag, self._live, self._stats,
-            lambda: self._input.subscription is not None, LOG_THROTTLE_S))
+        self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
         lazy = 'lazy subscription' if self._live.value('lazy_subscription') else 'subscribed'
         self.get_logger().info(f'ready: f = {self._live.startup_model.focal_length_mm:.4g} mm, '
                                f'{lazy} to {self._stats.input_topic}')
@@ -161,6 +154,7 @@ class CorrectNode(Node):
             return
         # The hardened services start it after the request; this covers other sets.
         self._rebuild_trigger.trigger()
+        self._check.user_set(changes_of(parameters))    # moves check.apply's bounds
         if 'remap_threads' in changed:
             set_remap_threads(int(self._live.value('remap_threads')))
         if 'lazy_subscription' in changed:
@@ -171,6 +165,12 @@ class CorrectNode(Node):
             self._compressed_settings = compressed_settings(self._live.value)
         if 'debayer' in changed:
             self._debayer = str(self._live.value('debayer'))
+
+    def _publish_diagnostics(self) -> None:
+        """Publish /diagnostics (timer), the check's entries as of now (their age)."""
+        self._stats.check = self._check.entries()
+        publish_diagnostics(self, self._pub_diag, self._live, self._stats,
+                            lambda: self._input.subscription is not None, LOG_THROTTLE_S)
 
     def _on_frame(self, msg: Any, read: Callable[[Any, FrameStats], Any]) -> None:
         """

@@ -57,7 +57,8 @@ class FrameStats:
         self.decode_count = 0           # since the last diagnostics message
         #: More entries for /diagnostics (the lens_state input's, lens_follower.py).
         self.extra: dict[str, Any] = {}
-        #: The last straight-edge check (check_thread.py), replaced whole by its thread.
+        #: The straight-edge check's entries (runtime/check_session.py), replaced whole by
+        #: the diagnostics timer before each message.
         self.check: dict[str, Any] = {}
         self._logged: dict[str, float] = {}     # kind of error -> time last logged, s
 
@@ -220,7 +221,9 @@ def _check_warning(check: Mapping[str, Any]) -> list[str]:
     if check.get('verdict') != 'description_off':
         return []
     return ['check: description_off: straight edges come out '
-            f"{_text(check.get('straightness_rms_px'))} px rms from straight (see estimate.*)"]
+            f"{_text(check.get('straightness_rms_px'))} px rms from straight (see estimate.*; "
+            f"{_text(check.get('check_age_s'))} s ago, model revision "
+            f"{_text(check.get('check_model_revision'))})"]
 
 
 #: Curves of the model report that /diagnostics leaves out (the scalars stay: e.g.

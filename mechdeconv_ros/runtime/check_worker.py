@@ -6,9 +6,13 @@ The straight-edge check in a child process (issue 26): its loop and the parent's
 Pure Python, numpy and OpenCV, no ROS (docs/design.md section 2.17). One check of one frame is
 seconds of Python; in the node's process it held the interpreter lock that the frame path
 needs (p99 latency 33 -> 46 ms at 1280x960). Here it runs in a child process
-(``python -c BOOTSTRAP FD``: :data:`BOOTSTRAP` runs :func:`main` of this module; started by
+(``python -P -c BOOTSTRAP FD``: :data:`BOOTSTRAP` runs :func:`main` of this module; started by
 :class:`CheckWorker` with :class:`subprocess.Popen`, so it imports nothing of ROS and
 inherits no ROS state, only the socket), which:
+
+* imports the package the parent runs, never one in its current directory: ``-P`` keeps the
+  current directory off ``sys.path`` (``python -c`` puts it first) and ``PYTHONPATH`` starts
+  with the directory that holds the parent's ``mechdeconv_ros`` (issue 36 (i));
 
 * lowers its own CPU priority to nice 19 and, on Linux, the SCHED_IDLE policy (it runs on a
   core no other thread wants, and a waking thread of the node takes the core at once: on 2
@@ -24,16 +28,27 @@ Protocol, over a :class:`multiprocessing.connection.Connection` on a Unix socket
 request and one reply at a time:
 
 * request: a pickled header ``{'shape', 'dtype', 'frame_model', 'current_model', 'models',
-  'window', 'max_rms_px'}`` and then the frame's bytes (``send_bytes`` of the array's buffer:
-  not pickled). Models are named by integer tokens; ``models`` carries only those the child
-  does not hold (a model is sent once, when it changes: :func:`portable`, about 90 kB and
-  1 ms for the fisheye config). Both sides keep only the two tokens of the last request.
+  'window', 'max_rms_px'}`` and then the frame's bytes (the array's buffer, not pickled),
+  each framed as :class:`~multiprocessing.connection.Connection` frames them (a 4-byte
+  big-endian length, then the bytes). The parent writes them without blocking, with a
+  deadline (:data:`SEND_TIMEOUT_S`), after a SIGCONT: a child left stopped (SIGSTOP, the
+  CPU gate) could not read, and a blocking multi-MB send would wait forever. Models are
+  named by integer tokens; ``models`` carries only those the child does not hold (a model
+  is sent once, when it changes: :func:`portable`, about 90 kB and 1 ms for the fisheye
+  config). Both sides keep only the two tokens of the last request.
 * reply: ``{'result': CheckResult | None, 'frames': n, 'ms': float}`` (None: the window was
   restarted because the frame's size is not the current model's) or ``{'error': repr}``.
 
 The child keeps what the node's thread kept: the frame model's float maps (rebuilt when the
 token changes) and the raw chains of the last ``window`` frames (raw pixels, so they stay
-valid when the model changes).
+valid when the model changes). A frame of another raw size than the window's starts a new
+window: raw pixels of two sizes are not one camera's (issue 36 (c)).
+
+A child that does not answer is never waited for silently (issue 36 (a)): it is continued
+(SIGCONT) before every send and after every reply, so a pause that lands after its reply
+cannot leave it stopped; a send that cannot finish within :data:`SEND_TIMEOUT_S`, or a reply
+that has not come after :data:`REPLY_TIMEOUT_S` of the child running (time paused by the
+gate not counted), raises :class:`WorkerStuck`; the caller restarts the child and says so.
 """
 
 from __future__ import annotations
@@ -44,8 +59,11 @@ import ctypes
 import dataclasses
 import os
 from pathlib import Path
+import pickle
+import select
 import signal
 import socket
+import struct
 import subprocess
 import sys
 import time
@@ -58,8 +76,18 @@ import numpy as np
 
 #: Linux prctl option: the signal a child gets when its parent (thread) dies.
 PR_SET_PDEATHSIG = 1
-#: Seconds the parent waits for the child to exit after SIGTERM before SIGKILL.
-STOP_WAIT_S = 2.0
+#: Seconds the parent waits for the child to exit after SIGTERM before SIGKILL: a node
+#: stopped by ``ros2 launch`` must be gone before its SIGTERM escalation (5 s after SIGINT
+#: by default). A child at SCHED_IDLE on a busy machine may need more to run its exit.
+STOP_WAIT_S = 1.0
+#: Seconds the parent then waits after SIGKILL (a child still not reaped is reparented and
+#: reaped by init when the node exits).
+KILL_WAIT_S = 0.5
+#: Seconds a request's send may take (a few MB into a running child: milliseconds).
+SEND_TIMEOUT_S = 30.0
+#: Seconds of running (not paused) after which a child that has not replied is stuck (a
+#: check takes 0.5 to 7 s; 20 x that).
+REPLY_TIMEOUT_S = 120.0
 #: The CPU priority (nice) of the child.
 NICE = 19
 #: One thread for numpy's BLAS and OpenMP in the child (set before it imports numpy).
@@ -72,6 +100,10 @@ BOOTSTRAP = ('import signal, sys; signal.signal(signal.SIGINT, signal.SIG_IGN); 
 
 class WorkerGone(RuntimeError):
     """The check's child process exited or its pipe broke."""
+
+
+class WorkerStuck(WorkerGone):
+    """The check's child process did not take a request or did not answer in time."""
 
 
 def portable(model: Any) -> Any:
@@ -100,6 +132,7 @@ class Worker:
         self.models: dict[int, Any] = {}
         self._maps: tuple[int | None, Any, Any] = (None, None, None)
         self._window: deque[list[Any]] = deque()
+        self._window_size: tuple[int, int] | None = None     # raw (width, height) pooled
 
     def handle(self, header: dict[str, Any], frame: np.ndarray) -> dict[str, Any]:
         """
@@ -118,6 +151,10 @@ class Worker:
             self._maps = (None, None, None)      # free the old maps before the new ones
             self._maps = (token, *build_float_maps(model))
         _, map_x, map_y = self._maps
+        size = (int(model.width), int(model.height))
+        if size != self._window_size:       # a camera that changed resolution: a new window
+            self._window.clear()
+            self._window_size = size
         self._window.append(chains_from_corrected(frame, map_x, map_y))
         while len(self._window) > int(header['window']):
             self._window.popleft()
@@ -168,6 +205,7 @@ class CheckWorker:
         #: Whether the child is stopped by :meth:`pause` (SIGSTOP) and not yet resumed.
         self.paused = False
         self._conn: Any = None
+        self._sock: socket.socket | None = None    # the same socket, for non-blocking sends
         self._held: dict[int, Any] = {}    # token -> model, as the child holds them
         self._next_token = 0
 
@@ -175,10 +213,12 @@ class CheckWorker:
         """Start the child process (a fresh one: no models, no window)."""
         from multiprocessing.connection import Connection
         parent, child = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+        # The directory holding THIS mechdeconv_ros goes first on the child's path, and -P
+        # keeps the current directory off it: a `mechdeconv_ros/` there must not shadow it.
         package_root = str(Path(__file__).resolve().parents[2])
         env = dict(os.environ)
         env['PYTHONPATH'] = os.pathsep.join(
-            p for p in (package_root, env.get('PYTHONPATH', '')) if p)
+            p for p in (package_root, *env.get('PYTHONPATH', '').split(os.pathsep)) if p)
         env.update(THREAD_ENV)
         try:
             # Its own session (and process group): SIGINT to the node's group (Ctrl-C, a
@@ -186,12 +226,13 @@ class CheckWorker:
             # `site`, before BOOTSTRAP can ignore SIGINT (a "Fatal Python error" traceback in
             # the node's log). The parent stops it; its socket's EOF ends it if the parent dies.
             self.process = subprocess.Popen(
-                [sys.executable, '-c', BOOTSTRAP, str(child.fileno()), str(os.getpid())],
+                [sys.executable, '-P', '-c', BOOTSTRAP, str(child.fileno()), str(os.getpid())],
                 pass_fds=(child.fileno(),), env=env, stdin=subprocess.DEVNULL,
                 start_new_session=True)
         finally:
             child.close()
-        self._conn = Connection(parent.detach())
+        self._sock = parent
+        self._conn = Connection(os.dup(parent.fileno()))
         self._held = {}
         self.paused = False
 
@@ -205,9 +246,13 @@ class CheckWorker:
 
     def check(self, frame: np.ndarray, model: Any, current: Any, window: int,
               max_rms_px: float, waiting: Callable[[], None] | None = None,
-              poll_s: float = 0.25) -> dict[str, Any]:
+              poll_s: float = 0.25, reply_timeout_s: float = REPLY_TIMEOUT_S,
+              send_timeout_s: float = SEND_TIMEOUT_S) -> dict[str, Any]:
         """
         Check a frame in the child; block (the interpreter lock released) until it replies.
+
+        The child is continued (SIGCONT) before the request is sent and after its reply has
+        come, whatever ``waiting`` did: it is never left stopped between two checks.
 
         :param frame: the corrected frame (C-contiguous).
         :param model: the model that corrected it.
@@ -215,10 +260,14 @@ class CheckWorker:
         :param window: how many frames' chains to pool.
         :param max_rms_px: ``check.max_rms_px``.
         :param waiting: called every ``poll_s`` seconds after the frame is sent, while the
-            reply has not come: the node pauses and continues the child there (never during
-            the send, which a stopped child would block).
+            reply has not come: the node pauses and continues the child there.
         :param poll_s: seconds between calls of ``waiting``.
+        :param reply_timeout_s: seconds of the child running (not paused) without a reply
+            after which it is stuck.
+        :param send_timeout_s: seconds the request's send may take.
         :return: the reply (module docstring).
+        :raises WorkerStuck: if the send or the reply did not come in time (the child is
+            still there: stop it).
         :raises WorkerGone: if the child exited or the pipe broke.
         """
         if self.process is None or self.process.poll() is not None:
@@ -232,17 +281,70 @@ class CheckWorker:
                   'frame_model': frame_token, 'current_model': current_token,
                   'window': int(window), 'max_rms_px': float(max_rms_px)}
         try:
-            self._conn.send(header)
-            self._conn.send_bytes(frame.reshape(-1).view(np.uint8))     # flat: bytes, not rows
+            self.resume()
+            deadline = time.monotonic() + send_timeout_s
+            self._send(pickle.dumps(header, pickle.HIGHEST_PROTOCOL), deadline)
+            self._send(frame.reshape(-1).view(np.uint8), deadline)     # flat: bytes, not rows
             self._held = tokens
-            while waiting is not None and not self._conn.poll(poll_s):
-                waiting()
+            self._wait_for_reply(waiting, poll_s, reply_timeout_s)
             reply = self._conn.recv()
+        except WorkerStuck:
+            self._held = {}
+            raise
         except (EOFError, OSError) as err:
             raise WorkerGone(f'the check process stopped ({err!r})') from err
+        finally:
+            if self.process is not None:
+                self.resume()       # a pause that came after the reply must not stay
         if 'error' in reply:
             self._held = {}     # the child may not have taken them: send them again
         return reply
+
+    def _send(self, data: Any, deadline: float) -> None:
+        """
+        Send one message framed as Connection frames it, without blocking past ``deadline``.
+
+        :param data: bytes or a byte buffer.
+        :param deadline: ``time.monotonic()`` by which it must be sent.
+        :raises WorkerStuck: when the child does not take it in time.
+        """
+        view = memoryview(data).cast('B')
+        size = len(view)
+        head = struct.pack('!i', size) if size <= 0x7fffffff else struct.pack('!iQ', -1, size)
+        for part in (memoryview(head), view):
+            while len(part):
+                try:
+                    part = part[self._sock.send(part, socket.MSG_DONTWAIT):]
+                except BlockingIOError:
+                    left = deadline - time.monotonic()
+                    if left <= 0.0 or not select.select([], [self._sock], [], left)[1]:
+                        raise WorkerStuck('the check process took no request in time'
+                                          ) from None
+
+    def _wait_for_reply(self, waiting: Callable[[], None] | None, poll_s: float,
+                        timeout_s: float) -> None:
+        """Poll for the reply, calling ``waiting``; raise WorkerStuck after ``timeout_s``."""
+        running_s, last = 0.0, time.monotonic()
+        while not self._conn.poll(poll_s):
+            now = time.monotonic()
+            if not self.paused:         # time paused by the gate is not the child's fault
+                running_s += now - last
+            last = now
+            if running_s > timeout_s:
+                raise WorkerStuck(f'the check process did not answer in {timeout_s:.0f} s '
+                                  'of running')
+            if waiting is not None:
+                waiting()
+
+    def resume(self) -> None:
+        """Continue the child (SIGCONT), whatever :attr:`paused` says; nothing if it is gone."""
+        process = self.process
+        if process is not None:
+            try:
+                process.send_signal(signal.SIGCONT)
+            except OSError:
+                pass
+        self.paused = False
 
     def pause(self, paused: bool) -> None:
         """
@@ -263,23 +365,37 @@ class CheckWorker:
         self.paused = paused
 
     def stop(self) -> None:
-        """Stop the child (SIGTERM, then SIGKILL after STOP_WAIT_S) and close the pipe."""
-        self.pause(False)     # not needed for SIGTERM (fatal: it wakes a stopped one); tidy
+        """
+        Stop the child (SIGTERM, then SIGKILL after STOP_WAIT_S); at most 1.5 s.
+
+        The pipe stays open until :meth:`close` (the caller's thread may still read it).
+        """
+        self.resume()       # not needed for SIGTERM (fatal: it wakes a stopped one); tidy
         process, self.process = self.process, None
         self.paused = False
         if process is not None and process.poll() is None:
+            try:    # SCHED_IDLE on a busy machine may not run its exit for seconds
+                os.sched_setscheduler(process.pid, os.SCHED_OTHER, os.sched_param(0))
+            except (AttributeError, OSError):   # not Linux, or RLIMIT_NICE forbids it
+                pass
             process.terminate()
             try:
                 process.wait(STOP_WAIT_S)
             except subprocess.TimeoutExpired:
                 process.kill()
-                process.wait(STOP_WAIT_S)
+                try:
+                    process.wait(KILL_WAIT_S)
+                except subprocess.TimeoutExpired:   # not yet scheduled to die: not our wait
+                    pass
 
     def close(self) -> None:
         """Close the parent's end of the pipe (after :meth:`stop` and the caller's join)."""
         if self._conn is not None:
             self._conn.close()
             self._conn = None
+        if self._sock is not None:
+            self._sock.close()
+            self._sock = None
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -297,6 +297,17 @@ class LiveModel:
         with self._lock:
             return self._values[name]
 
+    @property
+    def active(self) -> ActiveModel | None:
+        """Return the record frames use now (one reference read: it is immutable)."""
+        return self._active
+
+    @property
+    def values_generation(self) -> int:
+        """Return the generation of the committed values (sets that changed the model)."""
+        with self._lock:
+            return self._values_generation
+
     def validate(self, changes: Mapping[str, Any]) -> None:
         """
         Check a proposed set; build its candidate model when a model parameter changes.

@@ -390,7 +390,9 @@ SCHEMA: tuple[ParamSpec, ...] = (
     ParamSpec('check.apply', 'bool', False, '',
               'Set the estimated assembly parameters on this node (one atomic set) when the '
               'verdict is description_off and their 1-sigma is within their tolerances; '
-              'never farther than 3 tolerances from the values at start-up.'),
+              'made as a user set is, never farther than 3 tolerances from the values set '
+              'last by the user (at start-up or by a parameter set), and dropped when a set '
+              'came after the model it judged.'),
     # --- node behaviour (no effect on the model) ---
     ParamSpec('lazy_subscription', 'bool', True, '',
               'Subscribe to image_raw only while an output topic has a subscriber, like '
