@@ -3,7 +3,8 @@
 """
 The parameter schema: every parameter, its type, range, unit and check (layer 0).
 
-One module, ``params``: the single source of truth for the node's declarations, the CLI, the
-config YAML files and the README table. It imports no other module of the package (only the
-standard library and PyYAML), so every layer above may use it.
+``params``: the single source of truth for the node's declarations, the CLI, the config YAML
+files and the README table; ``stereo_params``: a stereo pair's parameters, built from it. It
+imports no other layer of the package (only the standard library and PyYAML), so every layer
+above may use it.
 """

@@ -539,6 +539,22 @@ def load_params_file(path: str | Path, node_name: str = 'correct_node') -> dict[
     :raises ValueError: when the file is not a params file or holds a bad value.
     :raises OSError: when the file cannot be read.
     """
+    return check_values(read_params_file(path, node_name))
+
+
+def read_params_file(path: str | Path, node_name: str) -> dict[str, Any]:
+    """
+    Read a ROS 2 params file's values for one node, flattened but not checked.
+
+    The sections ``/**``, ``node_name`` and ``/node_name`` are merged in that order;
+    ``use_sim_time`` and ``qos_overrides.*`` (rclpy's own) are dropped.
+
+    :param path: the YAML file.
+    :param node_name: the node whose section applies besides ``/**``.
+    :return: dotted name -> value as written.
+    :raises ValueError: when the file is not a params file.
+    :raises OSError: when the file cannot be read.
+    """
     with open(path, encoding='utf-8') as stream:
         try:
             document = yaml.safe_load(stream)
@@ -555,9 +571,8 @@ def load_params_file(path: str | Path, node_name: str = 'correct_node') -> dict[
             found = True
     if not found:
         raise ValueError(f'{path}: no "/**" or "{node_name}" section with ros__parameters')
-    merged = {k: v for k, v in merged.items() if k != 'use_sim_time' and
-              not k.startswith('qos_overrides.')}
-    return check_values(merged)
+    return {k: v for k, v in merged.items() if k != 'use_sim_time' and
+            not k.startswith('qos_overrides.')}
 
 
 def flatten(tree: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:

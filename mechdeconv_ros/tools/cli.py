@@ -12,6 +12,7 @@ Commands::
     mechdeconv project --params FILE [--width W --height H] IN.csv   (tx,ty -> tx,ty,u,v)
     mechdeconv vignetting --params FILE [--png OUT.png] [--lensfun]
     mechdeconv check --params P [--json] IMAGE...
+    mechdeconv stereo --params STEREO.yaml LEFT.png RIGHT.png -o DIR   (a rectified pair)
     mechdeconv import LENS.zmx -o lens.yaml [--wavelength-nm NM]
     mechdeconv import TABLE.csv --focal-length-mm F -o lens.yaml
 
@@ -326,6 +327,24 @@ def cmd_check(args: argparse.Namespace) -> int:
     return run_check(_model(args, w, h), images, _values(args), args.json, sys.stdout)
 
 
+def cmd_stereo(args: argparse.Namespace) -> int:
+    """Rectify a raw pair, write its camera_info files (:mod:`mechdeconv_ros.tools.stereo_cli`)."""
+    from mechdeconv_ros.tools.stereo_cli import pair_values, run_stereo
+    try:
+        values = pair_values(args.params, args.param or [])
+    except ValueError as err:
+        raise UsageError(str(err)) from None
+    left, right = _read(Path(args.left)), _read(Path(args.right))
+    try:
+        run_stereo(values, left, right, Path(args.output))
+    except ModelError:
+        raise
+    except ValueError as err:
+        raise UsageError(str(err)) from None
+    print(f'mechdeconv: wrote {args.output}', file=sys.stderr)
+    return 0
+
+
 def _one_line(err: BaseException) -> str:
     """Return an exception's message on one line (YAML and OpenCV messages span several)."""
     return ' '.join(part.strip() for part in str(err).splitlines() if part.strip())
@@ -562,6 +581,8 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument('--json', action='store_true', help='print one JSON object')
     check.add_argument('images', nargs='+', help='raw image files of one camera')
     check.set_defaults(func=cmd_check)
+    from mechdeconv_ros.tools.stereo_cli import add_stereo_parser
+    add_stereo_parser(sub).set_defaults(func=cmd_stereo)
     lens_import = sub.add_parser(
         'import', help='write a params file from a .zmx lens file or a datasheet CSV table',
         description='Write a ROS 2 params file (prescription mode) from a Zemax .zmx lens '
