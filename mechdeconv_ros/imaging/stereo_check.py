@@ -3,9 +3,9 @@
 """
 The rig's rotation measured from the scene: matched features, the epipolar fit, the verdict.
 
-Pure numpy and OpenCV, no ROS (docs/design.md section 8.4). Frames and signs are the rig's
-(section 8.1): in the left camera's optical frame (X right, Y down, Z ahead) the right
-camera's entrance pupil is at ``t = (B, t_y, t_z)`` mm (``rig.baseline_mm``,
+Pure numpy and OpenCV, no ROS (docs/design.md section 8, "The rig measured live"). Frames
+and signs are the rig's (section 8): in the left camera's optical frame (X right, Y down, Z
+ahead) the right camera's entrance pupil is at ``t = (B, t_y, t_z)`` mm (``rig.baseline_mm``,
 ``rig.offset_y_mm``, ``rig.offset_z_mm``) and its axes are the columns of
 ``R = R_x(r_x) R_y(r_y) R_z(r_z)`` (``rig.rotation_*_deg``); a scene point is
 ``X_r = R^T (X_l - t)`` in the right camera's frame.
@@ -36,7 +36,7 @@ camera's entrance pupil is at ``t = (B, t_y, t_z)`` mm (``rig.baseline_mm``,
    the description and the rest refitted: the scene does not measure it (a far, flat scene
    does not measure yaw).
 3. The verdict reads the vertical disparity of the inlier matches in the rectified pair
-   (each camera turned half way, rows along the baseline, :func:`rectifying_rotations`):
+   (the pair's own rectification, :func:`vertical_disparity`):
    ``v_l - v_r = f_y' (a_y / a_z - b_y / b_z)``, ``a = R_1 d_l``, ``b = R_2 d_r``, in px of the
    rectified image of focal length ``f_y'``. ``not_enough_matches`` below
    :data:`MIN_MATCHES` inliers or when either half (left, right) of the left image holds under
@@ -59,6 +59,7 @@ from typing import Any, Mapping, Sequence
 
 import cv2
 from mechdeconv_ros.model.projection import directions_of
+from mechdeconv_ros.model.stereo import rectifying_rotations, Rig, rig_rotation
 import numpy as np
 
 #: The rig's parameters the check may estimate, in the fit's order.
@@ -150,67 +151,41 @@ def match_pixels(left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.nd
 
 def rotation(rx_deg: float, ry_deg: float, rz_deg: float) -> np.ndarray:
     """
-    Return ``R = R_x(rx) R_y(ry) R_z(rz)`` (right-handed, about the left camera's axes).
+    Return ``R = R_x(rx) R_y(ry) R_z(rz)``: the rig's rotation (the model's one definition).
 
     :param rx_deg: rotation about X (deg).
     :param ry_deg: rotation about Y (deg).
     :param rz_deg: rotation about Z (deg).
     :return: ``(3, 3)`` rotation whose columns are the right camera's axes.
     """
-    a, b, c = np.radians([rx_deg, ry_deg, rz_deg])
-    rx = np.array([[1, 0, 0], [0, math.cos(a), -math.sin(a)], [0, math.sin(a), math.cos(a)]])
-    ry = np.array([[math.cos(b), 0, math.sin(b)], [0, 1, 0], [-math.sin(b), 0, math.cos(b)]])
-    rz = np.array([[math.cos(c), -math.sin(c), 0], [math.sin(c), math.cos(c), 0], [0, 0, 1]])
-    return rx @ ry @ rz
+    return rig_rotation(rx_deg, ry_deg, rz_deg)
 
 
-def rig_pose(values: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray]:
+def rig_of(params: np.ndarray, base_mm: float) -> Rig:
     """
-    Return the rig's ``(R, t_mm)`` from its parameter values.
+    Return the rig of the fit's parameter vector.
 
-    :param values: ``rig.*`` values (missing offsets and rotations are 0).
-    :return: ``R`` (3, 3) and ``t`` (3,) in mm.
+    :param params: ``(rx, ry, rz, t_y, t_z)`` in deg and mm.
+    :param base_mm: the baseline (mm).
+    :return: the rig.
     """
-    g = [float(values.get(n, 0.0)) for n in RIG_NAMES]
-    t = np.array([float(values['rig.baseline_mm']), g[3], g[4]])
-    return rotation(g[0], g[1], g[2]), t
+    return Rig(float(base_mm), float(params[3]), float(params[4]), float(params[0]),
+               float(params[1]), float(params[2]))
 
 
-def rectifying_rotations(rot: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """
-    Return the rotations ``(R_1, R_2)`` from each camera's frame to the common rectified one.
-
-    Each camera is turned half way (``R_h``, half of ``R``'s rotation vector), then both by
-    the rotation that puts the baseline along the rectified X (as OpenCV's stereoRectify):
-    ``X_rect = R_1 X_l`` and ``X_rect = R_2 X_r`` up to the baseline's shift.
-
-    :param rot: the rig's ``R``.
-    :param t: the rig's ``t``.
-    :return: ``R_1``, ``R_2``.
-    """
-    rvec = cv2.Rodrigues(np.asarray(rot, float))[0]
-    half = cv2.Rodrigues(rvec * 0.5)[0]
-    e1 = half.T @ np.asarray(t, float)
-    e1 /= np.linalg.norm(e1)
-    e2 = np.array([-e1[1], e1[0], 0.0])
-    e2 /= np.linalg.norm(e2)
-    turn = np.stack([e1, e2, np.cross(e1, e2)])
-    return turn @ half.T, turn @ half
-
-
-def vertical_disparity(d_l: np.ndarray, d_r: np.ndarray, rot: np.ndarray, t: np.ndarray,
-                       fy: float) -> np.ndarray:
+def vertical_disparity(d_l: np.ndarray, d_r: np.ndarray, rig: Rig, fy: float) -> np.ndarray:
     """
     Return each match's vertical disparity ``v_l - v_r`` (px) in the rig's rectified pair.
 
+    The pair's own rectification (:func:`mechdeconv_ros.model.stereo.rectifying_rotations`).
+
     :param d_l: ``(n, 3)`` left directions.
     :param d_r: ``(n, 3)`` right directions.
-    :param rot: the rig's ``R``.
-    :param t: the rig's ``t``.
+    :param rig: the rig.
     :param fy: the rectified camera's focal length in rows (px).
     :return: ``(n,)`` px.
     """
-    r1, r2 = rectifying_rotations(rot, t)
+    r1, r2 = rectifying_rotations(rig)
     a, b = d_l @ r1.T, d_r @ r2.T
     return fy * (a[:, 1] / a[:, 2] - b[:, 1] / b[:, 2])
 
@@ -488,11 +463,9 @@ def check_problem(problem: FitProblem, width: int, fy_rect: float,
                                  nan, nan, {})
     d_l, d_r = problem.d_l[inliers], problem.d_r[inliers]
 
-    def pose(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return rotation(*p[:3]), np.array([problem.base_mm, p[3], p[4]])
-
-    before = _rms(vertical_disparity(d_l, d_r, *pose(problem.described), fy_rect))
-    after = _rms(vertical_disparity(d_l, d_r, *pose(params), fy_rect))
+    before = _rms(vertical_disparity(d_l, d_r, rig_of(problem.described, problem.base_mm),
+                                     fy_rect))
+    after = _rms(vertical_disparity(d_l, d_r, rig_of(params, problem.base_mm), fy_rect))
     off = before > max(FLOOR_PX, AFTER_FACTOR * after)
     estimate = {
         RIG_NAMES[k]: {'value': float(params[k]), 'sigma': float(sigma[k]),

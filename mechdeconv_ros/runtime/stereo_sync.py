@@ -30,7 +30,7 @@ class StampPairer:
         """Start with empty queues and zero counters."""
         self._queues: dict[str, deque[tuple[float, Any]]] = {s: deque() for s in SIDES}
         self._last: dict[str, float] = {s: float('-inf') for s in SIDES}
-        self.unpaired = {s: 0 for s in SIDES}
+        self.unpaired = dict.fromkeys(SIDES, 0)
         self.pairs = 0
 
     def push(self, side: str, stamp: float, frame: Any, slop: float
