@@ -151,7 +151,7 @@ def match_pixels(left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.nd
 
 def rotation(rx_deg: float, ry_deg: float, rz_deg: float) -> np.ndarray:
     """
-    Return ``R = R_x(rx) R_y(ry) R_z(rz)``: the rig's rotation (the model's one definition).
+    Return the rig's rotation matrix R_x(rx) R_y(ry) R_z(rz) (the model's one definition).
 
     :param rx_deg: rotation about X (deg).
     :param ry_deg: rotation about Y (deg).
