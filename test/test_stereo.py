@@ -16,8 +16,9 @@ from mechdeconv_ros.imaging.stereo_remap import stereo_maps, StereoRectifier
 from mechdeconv_ros.model.model import ModelError
 from mechdeconv_ros.model.projection import directions_of, pixels_of
 from mechdeconv_ros.model.stereo import (
-    build_stereo, half_rotation, Rig, rig_rotation, stereo_camera_infos)
-from mechdeconv_ros.schema.params import SCHEMA
+    build_stereo, exact_directions, half_rotation, Rig, rig_rotation, stereo_camera_infos)
+from mechdeconv_ros.optics.ports import entrance_pupil_z
+from mechdeconv_ros.schema.params import load_params_file, SCHEMA
 from mechdeconv_ros.schema.stereo_params import (
     check_stereo_values, load_stereo_params_file, split_values, STEREO_SCHEMA, STEREO_SPECS)
 from mechdeconv_ros.tools.cli import main
@@ -239,6 +240,26 @@ def test_maps_are_the_forward_trace_of_each_rectified_ray(turned):
         assert_allclose(raw, pixels_of(model, rect @ rot), atol=1e-3)
 
 
+def test_a_finite_scene_is_seen_from_the_entrance_pupil():
+    """A point of the plane at l from H is at l + z_E - z_H from E, the pair's origin."""
+    values = {**pair_of(), 'left.scene.distance_mm': 500.0, 'right.scene.distance_mm': 500.0}
+    stereo = build_stereo(values)
+    left = stereo.left
+    offset = entrance_pupil_z(left.prescription) - left.source.first_order().front_principal_z_mm
+    assert abs(offset) > 0.1            # the Case 2 lens: E is 0.47 mm in front of H
+    (mx, my), _ = stereo_maps(stereo)
+    v, u = np.mgrid[0:stereo.height:20, 0:stereo.width:20]
+    d = np.stack([u, v, np.ones_like(u)], axis=-1).reshape(-1, 3).astype(float) @ \
+        np.linalg.inv(stereo.K_rect).T @ stereo.R1
+    point_e = d * ((500.0 + offset) / d[:, 2:3])        # on the plane, from E
+    point_h = point_e - [0.0, 0.0, offset]               # the same point from H
+    want = pixels_of(left, point_h)
+    got = np.column_stack([mx[v, u].ravel(), my[v, u].ravel()])
+    assert_allclose(got, want, atol=2e-3)
+    # Seen from H instead, the corners would be off by a tenth of a pixel.
+    assert np.abs(pixels_of(left, d) - want).max() > 0.1
+
+
 def test_alpha_0_shows_only_valid_pixels_and_1_every_raw_pixel(turned):
     values = {**pair_of(rotation_x_deg=0.4, rotation_y_deg=-1.5, rotation_z_deg=0.7,
                         offset_y_mm=3.0, offset_z_mm=-2.0)}
@@ -263,6 +284,54 @@ def test_rectifier_refuses_a_frame_of_the_wrong_size(turned):
         rectifier.rectify(good, np.zeros((10, 10), np.uint8))
     left, right = rectifier.rectify(good, good)
     assert left.shape == right.shape == (turned.height, turned.width)
+
+
+def camera_pair(path: Path, size: tuple[int, int], **extra) -> dict:
+    """Return pair values with both cameras from a single camera's params file."""
+    single = load_params_file(path)
+    values = {f'{camera}.{k}': v for camera in ('left', 'right') for k, v in single.items()
+              if not k.startswith(('output.', 'check.'))}
+    for camera in ('left', 'right'):
+        values[f'{camera}.sensor.width_px'], values[f'{camera}.sensor.height_px'] = size
+    values.update(extra)
+    return values
+
+
+@pytest.fixture(scope='module')
+def ported():
+    """Return a pair behind flat ports in seawater, the right port tilted by 2 deg."""
+    return build_stereo(camera_pair(REPO / 'config' / 'underwater_flat.yaml', (160, 120),
+                                    **{'right.port.tilt_x_deg': 2.0}))
+
+
+def test_a_tilted_port_frames_the_pair_by_its_exact_chief_rays(ported):
+    """The inverse of the symmetric model misses a tilted port; the outline must not."""
+    pixels = np.array([[-0.5, -0.5], [159.5, 119.5], [40.0, 100.0]])
+    model = ported.right
+    assert_allclose(pixels_of(model, exact_directions(model, pixels)), pixels, atol=1e-6)
+    # alpha 0: every rectified pixel of both maps is inside its raw image.
+    for mx, my in stereo_maps(ported):
+        assert mx.min() >= -0.5 and mx.max() <= 159.5
+        assert my.min() >= -0.5 and my.max() <= 119.5
+
+
+def test_lateral_colour_gives_each_channel_its_own_exact_map():
+    values = {**pair_of((160, 120)), 'left.lens.glass': 'N-BK7', 'right.lens.glass': 'N-BK7',
+              'output.lateral_color_correction': True}
+    stereo = build_stereo(values)
+    rectifier = StereoRectifier(stereo)
+    assert rectifier.colour is not None
+    maps = rectifier.colour[0].maps
+    red, blue = maps[0], maps[2]
+    # Lateral colour: the red and blue channels' rays land apart in the corner.
+    assert abs(float(red[0][0, 0] - blue[0][0, 0])) > 0.05
+    rng = np.random.default_rng(0)
+    raw = (rng.random((120, 160, 3)) * 255).astype(np.uint8)
+    left, _ = rectifier.rectify(raw, raw, colours=(2, 1, 0))     # BGR
+    for channel, colour in enumerate((2, 1, 0)):
+        want = cv2.remap(raw[..., channel], *maps[colour], cv2.INTER_LINEAR,
+                         borderMode=cv2.BORDER_CONSTANT)
+        assert np.abs(left[..., channel].astype(int) - want).max() <= 1
 
 
 # --- the command line -----------------------------------------------------------------------

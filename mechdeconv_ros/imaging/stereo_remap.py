@@ -7,7 +7,9 @@ For a rectified pixel ``(u, v)`` of camera i (both share ``K_rect``), the scene 
 the rectified frame is ``K_rect^-1 (u, v, 1)``, in camera i's frame ``d_i = R_i^T K_rect^-1
 (u, v, 1)`` (``R_i`` = R1 or R2, rectified-from-camera), and the raw pixel is the chief ray's
 landing point :func:`mechdeconv_ros.model.projection.pixels_of` ``(model_i, d_i)``: through the
-lens, the sensor's offset and tilt and any port, with no fitted D anywhere. Pixels no chief ray
+lens, the sensor's offset and tilt and any port, with no fitted D anywhere (for a finite
+``scene.distance_mm`` the direction is seen from the entrance pupil,
+:func:`mechdeconv_ros.model.stereo.pixels_from_pupil`). Pixels no chief ray
 reaches point far outside the raw image, so ``BORDER_CONSTANT`` paints them 0.
 
 Lateral colour (``output.lateral_color_correction``): each colour channel gets its own map,
@@ -30,8 +32,7 @@ import cv2
 from mechdeconv_ros.imaging.channel_remap import ChannelRemap
 from mechdeconv_ros.lenses.lens_errors import FloatArray
 from mechdeconv_ros.model.model import LensModel
-from mechdeconv_ros.model.projection import pixels_of
-from mechdeconv_ros.model.stereo import StereoModel
+from mechdeconv_ros.model.stereo import pixels_from_pupil, StereoModel
 import numpy as np
 
 Map = np.ndarray
@@ -62,7 +63,7 @@ def camera_maps(model: LensModel, rot: FloatArray, k_rect: FloatArray,
         rows = np.arange(top, min(top + _BAND_ROWS, height), dtype=np.float64)
         uu, vv = np.meshgrid(u, rows)
         q = np.stack([uu, vv, np.ones_like(uu)], axis=-1)
-        raw = pixels_of(model, q @ m)
+        raw = pixels_from_pupil(model, q @ m)
         bad = ~np.isfinite(raw).all(axis=-1)
         raw[bad] = _OUTSIDE
         map_x[top:top + rows.size] = raw[..., 0]

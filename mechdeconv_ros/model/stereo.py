@@ -30,6 +30,7 @@ CameraInfo convention). A point at depth Z (rectified frame, m) has disparity
 
 ``f`` and the principal point follow ``output.alpha`` over both cameras' raw outlines, seen
 through each camera's exact inverse (:func:`mechdeconv_ros.model.projection.directions_of`)
+(refined on the forward trace for a non-symmetric port, :func:`exact_directions`)
 and turned into the rectified frame: 0 frames the largest window inside both (only pixels
 valid in both images), 1 the smallest window holding all of both; in between, f and the
 window's centre interpolate linearly (as the single camera's ``output.alpha``).
@@ -41,9 +42,10 @@ from dataclasses import dataclass
 import math
 from typing import Any, Mapping
 
-from mechdeconv_ros.lenses.lens_errors import FloatArray, ModelError
+from mechdeconv_ros.lenses.lens_errors import FloatArray, ModelError, scene_distance
 from mechdeconv_ros.model.model import build_model, LensModel
-from mechdeconv_ros.model.projection import directions_of
+from mechdeconv_ros.model.projection import directions_of, pixels_of
+from mechdeconv_ros.optics.ports import entrance_pupil_z
 from mechdeconv_ros.schema.stereo_params import (
     check_stereo_values, RIG_PARAMS, split_values)
 import numpy as np
@@ -208,6 +210,106 @@ def _camera_model(camera: str, values: Mapping[str, Any], size: tuple[int, int])
         raise ModelError(name, err.reason) from None
 
 
+def exact_directions(model: LensModel, pixels: FloatArray, iterations: int = 3) -> FloatArray:
+    """
+    Return the scene directions of raw pixels, refined on the forward trace.
+
+    :func:`~mechdeconv_ros.model.projection.directions_of` inverts the symmetric model (lens
+    and sensor pose); a port that is tilted or decentred bends the chief rays off that, and only
+    :func:`~mechdeconv_ros.model.projection.pixels_of` traces it. Gauss-Newton steps on the
+    tangents ``(x/z, y/z)`` (numerical Jacobian of ``pixels_of``) make each direction the one
+    whose chief ray lands on its pixel; where a step fails the inverse's direction stays.
+
+    :param model: the camera's lens model.
+    :param pixels: ``(N, 2)`` raw pixels.
+    :param iterations: Gauss-Newton steps.
+    :return: ``(N, 3)`` unit directions; NaN outside the traced field.
+    """
+    d = directions_of(model, pixels)
+    with np.errstate(invalid='ignore'):
+        ahead = np.isfinite(d).all(axis=1) & (d[:, 2] > _MIN_Z)
+    if not ahead.any():
+        return d
+    tan = d[ahead, :2] / d[ahead, 2:3]
+    target = np.asarray(pixels, dtype=np.float64)[ahead]
+    eps = 1e-6
+
+    def trace(t: FloatArray) -> FloatArray:
+        return pixels_of(model, np.column_stack([t, np.ones(len(t))]))
+
+    for _ in range(iterations):
+        p = trace(tan)
+        jx = (trace(tan + [eps, 0.0]) - p) / eps
+        jy = (trace(tan + [0.0, eps]) - p) / eps
+        det = jx[:, 0] * jy[:, 1] - jy[:, 0] * jx[:, 1]
+        r = target - p
+        with np.errstate(invalid='ignore', divide='ignore'):
+            step = np.column_stack([(jy[:, 1] * r[:, 0] - jy[:, 0] * r[:, 1]) / det,
+                                    (jx[:, 0] * r[:, 1] - jx[:, 1] * r[:, 0]) / det])
+        good = np.isfinite(step).all(axis=1)
+        tan[good] += step[good]
+    out = d.copy()
+    refined = np.column_stack([tan, np.ones(len(tan))])
+    refined /= np.linalg.norm(refined, axis=1, keepdims=True)
+    landed = np.hypot(*(trace(tan) - target).T) < 1e-3
+    rows = np.flatnonzero(ahead)
+    out[rows[landed]] = refined[landed]
+    return out
+
+
+def pupil_tangent_scale(model: LensModel) -> float:
+    """
+    Return k: a direction's tangents seen from the entrance pupil E times k are those from H.
+
+    The single camera measures a finite scene's directions from its front principal point H
+    (``scene.distance_mm`` = l is the plane's distance from H); the pair's frames have their
+    origins at the paraxial entrance pupils E. A point of that plane is at depth
+    ``l + z_E - z_H`` from E and l from H, so ``tan_H = tan_E (l + z_E - z_H) / l``. At
+    infinity (l = 0 in the parameter) k = 1: directions are the same from every point. A lens
+    without surfaces (a datasheet table) or behind a port keeps k = 1 (section 8).
+
+    :param model: the camera's lens model.
+    :return: k.
+    """
+    distance = scene_distance(model.values)
+    if not math.isfinite(distance) or model.prescription is None or \
+            str(model.values.get('port.type', 'none')) != 'none':
+        return 1.0
+    offset = entrance_pupil_z(model.prescription) - model.source.first_order().front_principal_z_mm
+    return (distance + offset) / distance if math.isfinite(offset) else 1.0
+
+
+def pixels_from_pupil(model: LensModel, directions: FloatArray) -> FloatArray:
+    """
+    Return the raw pixels of directions seen from the camera's entrance pupil (the pair's frame).
+
+    :param model: the camera's lens model.
+    :param directions: ``(..., 3)`` in its optical frame, origin at its entrance pupil.
+    :return: ``(..., 2)`` raw pixels (:func:`~mechdeconv_ros.model.projection.pixels_of`).
+    """
+    d = np.array(directions, dtype=np.float64)
+    k = pupil_tangent_scale(model)
+    if k != 1.0:
+        d[..., :2] *= k
+    return pixels_of(model, d)
+
+
+def directions_from_pupil(model: LensModel, pixels: FloatArray) -> FloatArray:
+    """
+    Return the unit directions raw pixels see from the camera's entrance pupil (pair's frame).
+
+    :param model: the camera's lens model.
+    :param pixels: ``(N, 2)`` raw pixels.
+    :return: ``(N, 3)`` unit directions (:func:`exact_directions`, then from E).
+    """
+    d = exact_directions(model, pixels)
+    k = pupil_tangent_scale(model)
+    if k != 1.0:
+        d[..., :2] /= k
+        d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    return d
+
+
 def _rectified_outline(model: LensModel, rot: FloatArray) -> list[FloatArray]:
     """
     Return the raw outline's sides (top, bottom, left, right) in normalised rectified coords.
@@ -224,7 +326,7 @@ def _rectified_outline(model: LensModel, rot: FloatArray) -> list[FloatArray]:
              np.stack([np.full_like(ys, w - 0.5), ys], axis=1)]
     out = []
     for side in sides:
-        d = directions_of(model, side) @ rot.T
+        d = directions_from_pupil(model, side) @ rot.T
         with np.errstate(invalid='ignore'):
             keep = np.isfinite(d).all(axis=1) & (d[:, 2] > _MIN_Z * np.linalg.norm(d, axis=1))
         out.append(d[keep, :2] / d[keep, 2:3])
