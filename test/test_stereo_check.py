@@ -16,7 +16,7 @@ import math
 import cv2
 from mechdeconv_ros.imaging import stereo_check as sc
 from mechdeconv_ros.model.model import build_model
-from mechdeconv_ros.model.projection import pixels_of
+from mechdeconv_ros.model.projection import directions_of, pixels_of
 from mechdeconv_ros.schema.params import load_params_file
 import numpy as np
 from numpy.testing import assert_allclose
@@ -45,7 +45,7 @@ def synthetic_matches(cameras, rot_deg, t_mm=(120.0, 0.0, 0.0), n=1500, noise=0.
     rng = np.random.default_rng(seed)
     u_max = left.width if u_max is None else u_max
     p_l = np.stack([rng.uniform(5, u_max - 5, n), rng.uniform(5, left.height - 5, n)], 1)
-    d_l = sc.directions_of(left, p_l)
+    d_l = directions_of(left, p_l)
     depth = rng.uniform(1500.0, 8000.0, n)
     x_l = d_l / d_l[:, 2:3] * depth[:, None]
     x_r = (x_l - np.asarray(t_mm)) @ sc.rotation(*rot_deg)
@@ -180,3 +180,14 @@ def test_too_few_or_one_sided_matches_give_no_estimate(cameras, case):
     result = run(cameras, matches, TOL)
     assert result.verdict == 'not_enough_matches'
     assert not result.estimate
+
+
+def test_a_quarter_pixel_in_both_images_biases_the_pitch_between_focal_lengths(cameras):
+    """Why the detector's convention is corrected: +0.25 px in both is a rotation bias."""
+    p_l, p_r = synthetic_matches(cameras, (0.0, 0.0, 0.0), noise=0.0)
+    exact = run(cameras, (p_l, p_r), TOL).estimate['rig.rotation_x_deg']['value']
+    shifted = run(cameras, (p_l + 0.25, p_r + 0.25), TOL).estimate['rig.rotation_x_deg']['value']
+    f_l, f_r = cameras[0].K[1, 1], cameras[1].K[1, 1]
+    assert abs(exact) < 2e-4
+    assert_allclose(shifted, math.degrees(0.25 / f_r - 0.25 / f_l), rtol=0.2)
+    assert abs(shifted) > 0.0015

@@ -17,9 +17,9 @@ ahead) the right camera's entrance pupil is at ``t = (B, t_y, t_z)`` mm (``rig.b
    different focal length that offset is a rotation bias (0.0034 deg of pitch for 1092
    against 1449 px), so the detector runs with ``enable_precise_upscale`` which centres it
    (a test renders a blob and reads it back within 0.02 px). Each raw pixel is mapped to its
-   exact unit scene direction by its camera's inverse
-   (:func:`~mechdeconv_ros.model.projection.directions_of`): the lens, the sensor's pose and
-   any port included, no fitted D.
+   exact unit scene direction by its camera's inverse, seen from its entrance pupil
+   (:func:`~mechdeconv_ros.model.stereo.directions_from_pupil`): the lens, the sensor's pose
+   and any port included, no fitted D.
 2. The fit. A match's directions ``d_l``, ``d_r`` see one scene point only if ``d_l``, ``t``
    and ``R d_r`` are coplanar: ``e = d_l . (t_hat x R d_r) = 0``. Its residual in pixels is
    Sampson's first-order distance with one pixel of detection noise in each image:
@@ -58,8 +58,8 @@ import math
 from typing import Any, Mapping, Sequence
 
 import cv2
-from mechdeconv_ros.model.projection import directions_of
-from mechdeconv_ros.model.stereo import rectifying_rotations, Rig, rig_rotation
+from mechdeconv_ros.model.stereo import (
+    directions_from_pupil, rectifying_rotations, Rig, rig_rotation)
 import numpy as np
 
 #: The rig's parameters the check may estimate, in the fit's order.
@@ -497,7 +497,11 @@ def apply_values(result: StereoCheckResult, user: Mapping[str, Any]) -> dict[str
 def pair_directions(left_model: Any, right_model: Any, p_l: np.ndarray,
                     p_r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """
-    Return the unit scene directions of matched raw pixels through each camera's inverse.
+    Return the unit scene directions of matched raw pixels, each from its entrance pupil.
+
+    The pair's own inverse (:func:`mechdeconv_ros.model.stereo.directions_from_pupil`: the
+    exact inverse refined on the forward trace, seen from the entrance pupil, the rig's
+    origin).
 
     :param left_model: the left :class:`~mechdeconv_ros.model.model.LensModel`.
     :param right_model: the right one.
@@ -505,7 +509,7 @@ def pair_directions(left_model: Any, right_model: Any, p_l: np.ndarray,
     :param p_r: ``(n, 2)`` right raw pixels.
     :return: ``(d_l, d_r)``, ``(n, 3)`` each (NaN outside a traced field).
     """
-    return directions_of(left_model, p_l), directions_of(right_model, p_r)
+    return directions_from_pupil(left_model, p_l), directions_from_pupil(right_model, p_r)
 
 
 def check_pairs(left_model: Any, right_model: Any, rig: Mapping[str, Any],
