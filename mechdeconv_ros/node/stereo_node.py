@@ -59,8 +59,8 @@ DIAGNOSTICS_PERIOD_S = 1.0
 LOG_THROTTLE_S = 5.0
 
 
-def _stamp_s(msg: Any) -> float:
-    return float(msg.header.stamp.sec) + 1e-9 * float(msg.header.stamp.nanosec)
+def _stamp_ns(msg: Any) -> int:
+    return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
 
 
 class StereoNode(Node):
@@ -82,7 +82,7 @@ class StereoNode(Node):
         self._demosaicers = {side: Demosaicer() for side in SIDES}
         self._live = StereoLive(declare_schema(self, STEREO_SCHEMA), info_messages,
                                 log_function(self))
-        self._slop = float(self._live.value('sync.slop_s'))
+        self._slop_ns = round(float(self._live.value('sync.slop_s')) * 1e9)
         guard_parameter_services(self, lambda: None,
                                  bool(kwargs.get('allow_undeclared_parameters', False)))
         set_remap_threads(int(self._live.value('left.remap_threads')))
@@ -123,7 +123,7 @@ class StereoNode(Node):
             return
         self._check.user_set(changes)
         if 'sync.slop_s' in changed:
-            self._slop = float(self._live.value('sync.slop_s'))
+            self._slop_ns = round(float(self._live.value('sync.slop_s')) * 1e9)
         if 'stereo_check.rate_hz' in changed:
             self._check.settings_changed()
         if 'left.remap_threads' in changed:
@@ -133,7 +133,7 @@ class StereoNode(Node):
         """Queue a frame; rectify and publish the pair it completes (module docstring)."""
         start = time.perf_counter()
         self._stats.frames_in += 1
-        pair = self._pairer.push(side, _stamp_s(msg), (msg, read), self._slop)
+        pair = self._pairer.push(side, _stamp_ns(msg), (msg, read), self._slop_ns)
         if pair is None:
             return
         try:

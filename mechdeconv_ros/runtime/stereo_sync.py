@@ -28,20 +28,19 @@ class StampPairer:
 
     def __init__(self) -> None:
         """Start with empty queues and zero counters."""
-        self._queues: dict[str, deque[tuple[float, Any]]] = {s: deque() for s in SIDES}
-        self._last: dict[str, float] = {s: float('-inf') for s in SIDES}
+        self._queues: dict[str, deque[tuple[int, Any]]] = {s: deque() for s in SIDES}
+        self._last: dict[str, int] = dict.fromkeys(SIDES, -1)
         self.unpaired = dict.fromkeys(SIDES, 0)
         self.pairs = 0
 
-    def push(self, side: str, stamp: float, frame: Any, slop: float
-             ) -> tuple[Any, Any] | None:
+    def push(self, side: str, stamp: int, frame: Any, slop: int) -> tuple[Any, Any] | None:
         """
         Offer one frame; return ``(left, right)`` when it completes a pair.
 
         :param side: ``'left'`` or ``'right'``.
-        :param stamp: the frame's header stamp, s.
+        :param stamp: the frame's header stamp, ns.
         :param frame: anything (the node's message and reader).
-        :param slop: the largest stamp difference of a pair, s.
+        :param slop: the largest stamp difference of a pair, ns.
         :return: the pair's two frames, or None.
         """
         if stamp <= self._last[side]:
