@@ -44,6 +44,8 @@ FILES = {
     'garbage.zmx': 'hello\nSURF x\n',
     'garbage.csv': 'a,b\nc,d\n',
     'a_file': 'x',
+    'stereo.yaml': ('stereo_node:\n  ros__parameters:\n    left: {scene: {distance_mm: 0.0}}\n'
+                    '    right: {scene: {distance_mm: 0.0}}\n'),
 }
 
 #: (command line with file names relative to the test folder, words the error names).
@@ -112,6 +114,25 @@ CASES = [
     (['import', ZMX, '-o', 'o.yaml', '--focal-length-mm', '4'], 'is for a datasheet table'),
     (['import', ZMX, '-o', 'o.yaml', '--wavelength-nm', 'nan'], 'wavelength nan nm'),
     (['import', ZMX, '-o', 'a_folder'], 'a_folder: cannot write there'),
+    # stereo (issue 38): a pair's params, its images and its output folder.
+    (['stereo', '--params', CASE2, 'in.png', 'in.png', '-o', 'out'],
+     "unknown parameter 'lens."),
+    (['stereo', '--params', 'missing.yaml', 'in.png', 'in.png', '-o', 'out'],
+     '--params: cannot read missing.yaml'),
+    (['stereo', '--params', 'stereo.yaml', '-p', 'rig.baseline_mm=0', 'in.png', 'in.png',
+      '-o', 'out'], 'rig.baseline_mm: must be > 0'),
+    (['stereo', '--params', 'stereo.yaml', '-p', 'left.lens.r1_mm=[', 'in.png', 'in.png',
+      '-o', 'out'], 'the value is not YAML'),
+    (['stereo', '--params', 'stereo.yaml', '-p', 'lens.r1_mm=5', 'in.png', 'in.png', '-o',
+      'out'], 'known pair parameter name'),
+    (['stereo', '--params', 'stereo.yaml', '-p', 'right.lens.thickness_mm=30', 'in.png',
+      'in.png', '-o', 'out'], 'right.lens.'),
+    (['stereo', '--params', 'stereo.yaml', '-p', 'left.sensor.width_px=100', 'in.png',
+      'in.png', '-o', 'out'], 'LEFT: the image is 64x48'),
+    (['stereo', '--params', 'stereo.yaml', 'in.png', 'garbage.csv', '-o', 'out'],
+     'garbage.csv: not a readable image'),
+    (['stereo', '--params', 'stereo.yaml', 'in.png', 'in.png', '-o', 'a_file'],
+     'cannot make the output folder'),
 ]
 
 
@@ -165,7 +186,8 @@ def test_argparse_refusals_exit_2_with_usage(capsys: pytest.CaptureFixture[str])
     """Unknown commands, options and choices are argparse's: status 2, usage, no traceback."""
     for argv in (['nope'], ['info', '--nope'], ['info', '--width', 'wide'],
                  ['correct', '--bayer', 'rgbg', 'a.png', 'b.png'], ['import', 'x.zmx'],
-                 ['import', 'x.csv', '-o', 'o.yaml', '--focal-length-mm', 'f']):
+                 ['import', 'x.csv', '-o', 'o.yaml', '--focal-length-mm', 'f'],
+                 ['stereo', 'l.png', 'r.png', '-o', 'out'], ['stereo', '--params', 'p.yaml']):
         with pytest.raises(SystemExit) as exit_info:
             main(argv)
         assert exit_info.value.code == 2, argv

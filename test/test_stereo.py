@@ -16,7 +16,8 @@ from mechdeconv_ros.imaging.stereo_remap import stereo_maps, StereoRectifier
 from mechdeconv_ros.model.model import ModelError
 from mechdeconv_ros.model.projection import directions_of, pixels_of
 from mechdeconv_ros.model.stereo import (
-    build_stereo, exact_directions, half_rotation, Rig, rig_rotation, stereo_camera_infos)
+    build_stereo, exact_directions, half_rotation, rectified_points, rectifying_rotations, Rig,
+    rig_rotation, stereo_camera_infos)
 from mechdeconv_ros.optics.ports import entrance_pupil_z
 from mechdeconv_ros.schema.params import load_params_file, SCHEMA
 from mechdeconv_ros.schema.stereo_params import (
@@ -128,6 +129,21 @@ def test_half_rotation_squares_to_the_rotation():
     assert_allclose(half @ half.T, np.eye(3), atol=1e-14)
 
 
+@pytest.mark.parametrize('rig', [
+    Rig(120.0, 3.0, -2.0, 0.4, -1.5, 0.7), Rig(120.0, 0.0, 0.0, 0.0, 2.0, 0.0),
+    Rig(60.0, 10.0, 5.0, -3.0, 4.0, 2.0)], ids=['turned', 'toe-in', 'large'])
+def test_rotations_are_opencvs_stereo_rectify_of_the_rig(rig):
+    """Compare with OpenCV's extrinsics: X_r = R_cv X_l + T_cv, R_cv = R^T, T_cv = -R^T t."""
+    k = np.array([[1000.0, 0.0, 320.0], [0.0, 1000.0, 240.0], [0.0, 0.0, 1.0]])
+    r1, r2, _, p2, _, _, _ = cv2.stereoRectify(
+        k, np.zeros(5), k, np.zeros(5), (640, 480), rig.R.T, -rig.R.T @ rig.t_mm,
+        flags=cv2.CALIB_ZERO_DISPARITY, alpha=-1)
+    ours = rectifying_rotations(rig)
+    assert_allclose(ours[0], r1, atol=1e-12)
+    assert_allclose(ours[1], r2, atol=1e-12)
+    assert_allclose(-p2[0, 3] / p2[0, 0], np.linalg.norm(rig.t_mm))
+
+
 def test_rectified_frames_share_an_orientation_with_the_baseline_along_x(turned):
     rig = turned.rig
     # R2 = R1 R: a direction seen by both cameras is one rectified direction.
@@ -191,6 +207,29 @@ def test_camera_infos_follow_the_ros_stereo_contract(turned):
         assert_allclose(np.reshape(rect['P'], (3, 4)), proj)
 
 
+def test_opencv_rectifies_from_the_camera_infos_as_the_exact_maps(turned):
+    """
+    Run initUndistortRectifyMap(K, D, R, P), as image_proc does: the exact maps, nearly.
+
+    R's direction (rectified-from-camera) and P are OpenCV's; the only difference left is the
+    fitted D's (section 2.8).
+    """
+    infos = stereo_camera_infos(turned)
+    for side, (mx, my) in zip(('left', 'right'), stereo_maps(turned)):
+        info = infos[side]
+        cv_x, cv_y = cv2.initUndistortRectifyMap(
+            np.reshape(info['K'], (3, 3)), np.array(info['D']), np.reshape(info['R'], (3, 3)),
+            np.reshape(info['P'], (3, 4)), (turned.width, turned.height), cv2.CV_32FC1)
+        gap = np.hypot(cv_x - mx, cv_y - my)
+        assert gap.max() < 0.05, f'{side}: {gap.max():.3f} px'
+    # R transposed (the most common mistake) would be off by pixels.
+    wrong = cv2.initUndistortRectifyMap(
+        turned.left.K, np.array(turned.left.D), turned.R1.T, turned.P1,
+        (turned.width, turned.height), cv2.CV_32FC1)
+    (mx, my), _ = stereo_maps(turned)
+    assert np.hypot(wrong[0] - mx, wrong[1] - my).max() > 1.0
+
+
 def test_image_geometry_reads_the_baseline_and_depth_back(turned):
     """StereoCameraModel: baseline = -Tx_right / fx_right; Z = -Tx / (d - (cx_l - cx_r))."""
     infos = stereo_camera_infos(turned)
@@ -238,6 +277,17 @@ def test_maps_are_the_forward_trace_of_each_rectified_ray(turned):
         want = rect / np.linalg.norm(rect, axis=1, keepdims=True)
         assert_allclose(seen, want, atol=2e-6)
         assert_allclose(raw, pixels_of(model, rect @ rot), atol=1e-3)
+
+
+def test_rectified_points_invert_the_maps(turned):
+    rng = np.random.default_rng(0)
+    u = rng.integers(0, turned.width, 30)
+    v = rng.integers(0, turned.height, 30)
+    for side, (mx, my) in zip(('left', 'right'), stereo_maps(turned)):
+        raw = np.column_stack([mx[v, u], my[v, u]]).astype(np.float64)
+        # The maps are float32: 1e-4 px at these coordinates.
+        assert_allclose(rectified_points(turned, side, raw), np.column_stack([u, v]),
+                        atol=1e-3)
 
 
 def test_a_finite_scene_is_seen_from_the_entrance_pupil():
@@ -334,6 +384,50 @@ def test_lateral_colour_gives_each_channel_its_own_exact_map():
         assert np.abs(left[..., channel].astype(int) - want).max() <= 1
 
 
+def test_vignetting_gain_is_one_over_ri_where_each_ray_lands():
+    values = {**pair_of((480, 360)), 'output.vignetting_correction': True}
+    stereo = build_stereo(values)
+    rectifier = StereoRectifier(stereo)
+    assert rectifier.gains is not None
+    gain = rectifier.gains[0]
+    centre = gain[180, 240]
+    assert_allclose(centre, 1.0, atol=0.02)
+    assert gain[0, 0] > centre + 0.05          # the corner is darker: a larger gain
+    raw = np.full((360, 480), 100, np.uint8)
+    left, right = rectifier.rectify(raw, raw)
+    assert_allclose(left.astype(float), np.round(np.minimum(100.0 * gain, 255.0)), atol=1.0)
+    ri = stereo.left.illumination(with_fraction=False)
+    x, y = rectifier.left_x[0, 0], rectifier.left_y[0, 0]
+    rho = np.hypot((x - stereo.left.K[0, 2]) * stereo.left.pixel_mm[0],
+                   (y - stereo.left.K[1, 2]) * stereo.left.pixel_mm[1])
+    assert_allclose(gain[0, 0], 1.0 / ri.at(rho), rtol=1e-5)
+
+
+def test_two_different_cameras_share_the_rectified_pinhole():
+    """A right camera of another size and pitch: one K_rect, the left camera's size."""
+    values = {**pair_of((320, 240), rotation_y_deg=0.5), 'right.sensor.width_px': 400,
+              'right.sensor.height_px': 300, 'right.sensor.pixel_size_x_um': 3.5,
+              'right.sensor.pixel_size_y_um': 3.5}
+    stereo = build_stereo(values)
+    assert (stereo.width, stereo.height) == (320, 240)
+    assert (stereo.right.width, stereo.right.height) == (400, 300)
+    (lx, ly), (rx, ry) = stereo_maps(stereo)
+    assert rx.shape == lx.shape == (240, 320)
+    # alpha 0: every rectified pixel reads inside both raw images.
+    assert rx.min() >= -0.5 and rx.max() <= 399.5 and ry.min() >= -0.5 and ry.max() <= 299.5
+    # A scene direction lands on one rectified row in both images.
+    d_rect = np.array([[0.1, -0.05, 1.0], [-0.08, 0.07, 1.0]])
+    rect = d_rect @ stereo.K_rect.T
+    rect = rect[:, :2] / rect[:, 2:]
+    for model, rot, mx, my in ((stereo.left, stereo.R1, lx, ly),
+                               (stereo.right, stereo.R2, rx, ry)):
+        raw = pixels_of(model, d_rect @ rot)
+        got = np.column_stack([cv2.remap(m, rect[:, :1].astype(np.float32),
+                                         rect[:, 1:].astype(np.float32), cv2.INTER_LINEAR)
+                               .ravel() for m in (mx, my)])
+        assert_allclose(got, raw, atol=0.02)
+
+
 # --- the command line -----------------------------------------------------------------------
 
 @pytest.fixture(scope='module')
@@ -403,3 +497,13 @@ def test_cli_refuses_a_single_camera_params_file(cli_pair, capsys):
                  str(folder / 'l.png'), str(folder / 'r.png'), '-o', str(folder / 'bad')])
     assert code == 2
     assert "unknown parameter 'lens." in capsys.readouterr().err
+
+
+def test_design_section_8_lists_the_pairs_own_parameters():
+    """docs/design.md section 8's table has every rig.*, sync.* and stereo_check.* spec."""
+    text = (REPO / 'docs' / 'design.md').read_text(encoding='utf-8')
+    section = text.split('## 8. Stereo', 1)[1]
+    for spec in STEREO_SCHEMA:
+        if spec.name.startswith(('rig.', 'sync.', 'stereo_check.')):
+            assert f'| `{spec.name}` |' in section, spec.name
+            assert spec.description in section, spec.name

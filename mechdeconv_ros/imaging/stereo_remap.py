@@ -12,6 +12,8 @@ lens, the sensor's offset and tilt and any port, with no fitted D anywhere (for 
 :func:`mechdeconv_ros.model.stereo.pixels_from_pupil`). Pixels no chief ray
 reaches point far outside the raw image, so ``BORDER_CONSTANT`` paints them 0.
 
+Vignetting (``output.vignetting_correction``): each camera's gain ``min(1 / RI, max_gain)`` at
+the raw pixel its rectified pixel reads (:func:`camera_gain`), multiplied after the remap.
 Lateral colour (``output.lateral_color_correction``): each colour channel gets its own map,
 traced through that channel's chief rays (the single camera's channel traces), and the
 channels are remapped in one pass (:class:`~mechdeconv_ros.imaging.channel_remap.
@@ -92,6 +94,35 @@ def _channel_maps(model: LensModel, rot: FloatArray, k_rect: FloatArray,
             for channel in model.lateral_color().channels]
 
 
+def camera_gain(model: LensModel, map_x: Map, map_y: Map, max_gain: float) -> Map:
+    """
+    Return the vignetting gain of each rectified pixel, from RI where its ray lands.
+
+    gain = min(1 / RI(rho), max_gain), rho the raw pixel's distance from the lens axis on the
+    sensor (mm), as the single camera's gain map; 0 where RI < 1 / max_gain (the corrected
+    field ends) and where no chief ray lands.
+
+    :param model: the camera's lens model.
+    :param map_x: its rectified-to-raw x map.
+    :param map_y: its y map.
+    :param max_gain: ``output.max_vignetting_gain``.
+    :return: ``(height, width)`` float32.
+    """
+    rho = np.hypot((map_x - model.K[0, 2]) * model.pixel_mm[0],
+                   (map_y - model.K[1, 2]) * model.pixel_mm[1])
+    ri = model.illumination(with_fraction=False).at(rho)
+    with np.errstate(divide='ignore'):
+        gain = np.where(ri >= 1.0 / max_gain, 1.0 / np.maximum(ri, 1e-12), 0.0)
+    gain[map_x <= _OUTSIDE] = 0.0
+    return np.minimum(gain, max_gain).astype(np.float32)
+
+
+#: OpenCV depth of each image dtype the gain multiplies.
+_CV_DEPTH = {np.dtype(np.uint8): cv2.CV_8U, np.dtype(np.uint16): cv2.CV_16U,
+             np.dtype(np.int16): cv2.CV_16S, np.dtype(np.float32): cv2.CV_32F,
+             np.dtype(np.float64): cv2.CV_64F}
+
+
 class StereoRectifier:
     """
     The maps of one StereoModel, built once, and the per-pair rectification.
@@ -100,17 +131,29 @@ class StereoRectifier:
     models. ``rectify`` is safe from one thread at a time per instance.
     """
 
-    def __init__(self, stereo: StereoModel, lateral: bool | None = None) -> None:
+    def __init__(self, stereo: StereoModel, lateral: bool | None = None,
+                 vignetting: bool | None = None) -> None:
         """
         Trace both cameras' maps.
 
         :param stereo: the stereo model.
         :param lateral: per-channel maps for lateral colour; None = the pair's
             ``output.lateral_color_correction``.
+        :param vignetting: gain maps for the vignetting correction; None = the pair's
+            ``output.vignetting_correction``.
         """
         self.stereo = stereo
         (self.left_x, self.left_y), (self.right_x, self.right_y) = stereo_maps(stereo)
         self.interpolation = stereo.left.interpolation
+        values = stereo.left.values
+        if vignetting is None:
+            vignetting = bool(values.get('output.vignetting_correction', False))
+        self.gains: tuple[Map, Map] | None = None
+        self._merged: dict[tuple[int, int], Map] = {}
+        if vignetting:
+            max_gain = float(values['output.max_vignetting_gain'])
+            self.gains = (camera_gain(stereo.left, self.left_x, self.left_y, max_gain),
+                          camera_gain(stereo.right, self.right_x, self.right_y, max_gain))
         if lateral is None:
             lateral = bool(stereo.left.values.get('output.lateral_color_correction', False))
         self.colour: tuple[ChannelRemap, ChannelRemap] | None = None
@@ -134,10 +177,21 @@ class StereoRectifier:
             raise ValueError(f'{side} frame is {src.shape[1]}x{src.shape[0]} px but the '
                              f'{side} camera is {model.width}x{model.height} px')
         if colours and self.colour is not None and src.ndim == 3:
-            return self.colour[index].remap(src, colours, self.interpolation, dst)
-        map_x, map_y = ((self.left_x, self.left_y), (self.right_x, self.right_y))[index]
-        return cv2.remap(src, map_x, map_y, self.interpolation, dst=dst,
-                         borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+            out = self.colour[index].remap(src, colours, self.interpolation, dst)
+        else:
+            map_x, map_y = ((self.left_x, self.left_y), (self.right_x, self.right_y))[index]
+            out = cv2.remap(src, map_x, map_y, self.interpolation, dst=dst,
+                            borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        if self.gains is not None:
+            channels = 1 if out.ndim == 2 else out.shape[2]
+            gain = self._merged.get((index, channels))
+            if gain is None:
+                gain = self.gains[index] if channels == 1 else \
+                    cv2.merge([self.gains[index]] * channels)
+                self._merged[(index, channels)] = gain
+            # In place; cv2 saturates integer images instead of wrapping.
+            cv2.multiply(out, gain, dst=out, dtype=_CV_DEPTH[out.dtype])
+        return out
 
     def rectify(self, left: np.ndarray, right: np.ndarray, *,
                 colours: Sequence[int] | None = None,

@@ -423,6 +423,28 @@ def build_stereo(values: Mapping[str, Any], left_size: tuple[int, int] = (0, 0),
                        P2=p2, width=width, height=height, baseline_m=baseline_m, values=full)
 
 
+def rectified_points(stereo: StereoModel, side: str, pixels: FloatArray) -> FloatArray:
+    """
+    Return where raw pixels of one camera land in its rectified image (the maps' inverse).
+
+    raw pixel -> :func:`directions_from_pupil` -> R1 or R2 -> K_rect; a matched feature's
+    vertical disparity in the rectified pair is the difference of the two results' y.
+
+    :param stereo: the stereo model.
+    :param side: ``'left'`` or ``'right'``.
+    :param pixels: ``(N, 2)`` raw pixels of that camera.
+    :return: ``(N, 2)`` rectified pixels; NaN outside the traced field or behind the
+        rectified image plane.
+    """
+    model, rot = {'left': (stereo.left, stereo.R1), 'right': (stereo.right, stereo.R2)}[side]
+    q = directions_from_pupil(model, np.asarray(pixels, dtype=np.float64)) @ (
+        stereo.K_rect @ rot).T
+    with np.errstate(invalid='ignore', divide='ignore'):
+        out = q[:, :2] / q[:, 2:3]
+        out[~(q[:, 2] > 0.0)] = np.nan
+    return out
+
+
 def stereo_camera_infos(stereo: StereoModel) -> dict[str, dict[str, Any]]:
     """
     Return the four CameraInfo contents of a calibrated stereo camera, as plain lists.

@@ -59,8 +59,8 @@ _RIG = (
      "Right camera turned about the left camera's Y axis (yaw; right-handed about Y down, "
      '> 0 turns its view toward +X), applied second.'),
     ('rotation_z_deg', 'deg', 0.0, (-45.0, 45.0), 0.5,
-     "Right camera turned about the left camera's Z axis (roll; right-handed about the view "
-     'direction), applied first.'),
+     "Right camera turned about the left camera's Z axis (roll; right-handed, > 0 turns its "
+     'X axis toward +Y, down), applied first.'),
 )
 #: The rig's parameter names, in the order of :data:`_RIG`.
 RIG_PARAMS = tuple(f'rig.{name}' for name, *_ in _RIG)
