@@ -15,6 +15,7 @@ and leaving the model, then the idle-time check (/diagnostics carries the CLI's 
 
 from __future__ import annotations
 
+import array
 import sys
 import time
 from typing import Any
@@ -22,6 +23,7 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray
 from mechdeconv_ros.imaging.stereo_remap import StereoRectifier
 from mechdeconv_ros.model.stereo import build_stereo
+from mechdeconv_ros.node.compressed import encode
 from mechdeconv_ros.node.image_msgs import image_to_array
 from mechdeconv_ros.schema.stereo_params import check_stereo_values
 import numpy as np
@@ -29,7 +31,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 import pytest
 from rclpy.parameter import Parameter
 from ros_helpers import BEST_EFFORT, make_image, next_domain_id, running_node, stamp_of
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from stereo_scenes import depth_scene, render_pair
 import yaml
 
@@ -104,8 +106,8 @@ class Harness:
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             self.pair(timeout=0.5)
-            for array in reversed(self.diagnostics):
-                status = array.status[0]
+            for diagnostics in reversed(self.diagnostics):
+                status = diagnostics.status[0]
                 if 'stereo' not in status.name:
                     continue
                 values = {kv.key: kv.value for kv in status.values}
@@ -230,3 +232,38 @@ def test_the_check_reports_rig_off_and_apply_sets_the_pitch(harness):
     assert 'stereo_check.apply: set' in harness.proc.output()
     ok = harness.diag(lambda v: v.get('verdict') == 'ok', 120.0)
     assert ok is not None
+
+
+def test_compressed_input_on_one_side(tmp_path):
+    """With left.image_transport compressed a left PNG gives the same rectified pair."""
+    left, right, _ = render_pair(PAIR, {}, depth_scene(2), SIZE)
+    params = params_file(tmp_path / 'stereo.yaml', PAIR)
+    argv = [sys.executable, '-c', 'from mechdeconv_ros.node.entry import stereo_node; '
+            'stereo_node()', '--ros-args', '--params-file', str(params),
+            '-p', 'left.image_transport:=compressed']
+    with running_node(argv, next_domain_id(), tmp_path, answer_timeout=60.0,
+                      node_name='stereo_node') as (proc, client):
+        node = client.node
+        pub_l = node.create_publisher(CompressedImage, 'left/image_raw/compressed', BEST_EFFORT)
+        pub_r = node.create_publisher(Image, 'right/image_raw', BEST_EFFORT)
+        got: dict[str, Any] = {}
+        for side in ('left', 'right'):
+            node.create_subscription(Image, f'{side}/image_rect',
+                                     lambda msg, s=side: got.__setitem__(s, msg), BEST_EFFORT)
+        fmt, data = encode(left, 'mono8', 'png')
+        deadline = time.monotonic() + 30.0
+        sec = 0
+        while len(got) < 2:
+            assert time.monotonic() < deadline, proc.output()[-3000:]
+            sec += 1
+            msg_l = CompressedImage(format=fmt)
+            msg_l.data = array.array('B', data)
+            msg_r = make_image(right, 'mono8')
+            for msg in (msg_l, msg_r):
+                msg.header.stamp.sec = sec
+            pub_l.publish(msg_l)
+            pub_r.publish(msg_r)
+            client.spin_until(lambda: len(got) == 2, 1.0)
+        rect_l, rect_r = expected(PAIR)[1].rectify(left, right)
+        assert_array_equal(image_to_array(got['left'])[0], rect_l)
+        assert_array_equal(image_to_array(got['right'])[0], rect_r)
