@@ -93,19 +93,23 @@ class StereoCheckThread:
         """Start the coordinator thread (the child starts with the first check)."""
         self._thread.start()
 
-    def offer(self, left: Any, right: Any, active: Any) -> None:
+    def offer(self, left: Any, right: Any, active: Any,
+              copy: tuple[bool, bool] = (False, False)) -> None:
         """
         Keep a raw pair for the next check, at most ``stereo_check.rate_hz`` (frame path).
 
         :param left: the left raw pixels (kept by reference).
         :param right: the right raw pixels.
         :param active: the pair record that rectified them.
+        :param copy: per side, whether its buffer is reused by the next frame (a demosaiced
+            one): that side is copied (a Bayer camera's check costs one copy per check).
         """
         rate = self._rate
         now = time.monotonic()
         if rate <= 0.0 or now - self._last_offer < 1.0 / rate:
             return
         self._last_offer = now
+        left, right = (p.copy() if c else p for p, c in zip((left, right), copy))
         with self._cond:
             self._pending = (left, right, active)
             self._cond.notify()

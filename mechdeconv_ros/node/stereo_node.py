@@ -143,20 +143,23 @@ class StereoNode(Node):
         self._rectify_and_publish(frames, start)
 
     def _read(self, side: str, msg: Any, read: Callable[[Any, FrameStats], Any]
-              ) -> tuple[Any, Any, Any]:
+              ) -> tuple[Any, Any, Any, bool]:
         pixels, encoding = read(msg, self._stats)
-        if encoding.bayer:
+        demosaiced = bool(encoding.bayer)
+        if demosaiced:
             pixels, encoding, _ = demosaic_frame(pixels, encoding, self._demosaicers[side],
                                                  str(self._live.value(f'{side}.debayer')),
                                                  self._stats)
-        return msg.header, pixels, encoding
+        # A demosaiced frame lives in a buffer the next frame reuses: the check gets a copy.
+        return msg.header, pixels, encoding, demosaiced
 
-    def _rectify_and_publish(self, frames: list[tuple[Any, Any, Any]], start: float) -> None:
+    def _rectify_and_publish(self, frames: list[tuple[Any, Any, Any, bool]],
+                             start: float) -> None:
         """Rectify one pair with ONE pair record and publish it; never raises."""
         active = self._live.active      # the one read: everything below uses this record
         stats = self._stats
         try:
-            (h_l, left, enc_l), (h_r, right, enc_r) = frames
+            (h_l, left, enc_l, reused_l), (h_r, right, enc_r, reused_r) = frames
             out_l = self._pools['left'].get(active.stereo.width, active.stereo.height,
                                             enc_l.name)
             out_r = self._pools['right'].get(active.stereo.width, active.stereo.height,
@@ -170,7 +173,7 @@ class StereoNode(Node):
             for key, info in active.extras.items():
                 info.header = h_l if key.startswith('left') else h_r
                 self._pub_infos[key].publish(info)
-            self._check.offer(left, right, active)
+            self._check.offer(left, right, active, copy=(reused_l, reused_r))
         except ValueError as err:       # a frame size that is not its camera's
             stats.frames_dropped += 1
             return self._frame_error('size', f'pair dropped: {err}')
