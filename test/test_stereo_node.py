@@ -16,6 +16,7 @@ and leaving the model, then the idle-time check (/diagnostics carries the CLI's 
 from __future__ import annotations
 
 import array
+import os
 import sys
 import time
 from typing import Any
@@ -28,6 +29,7 @@ from mechdeconv_ros.node.image_msgs import image_to_array
 from mechdeconv_ros.schema.stereo_params import check_stereo_values
 import numpy as np
 from numpy.testing import assert_allclose, assert_array_equal
+import psutil
 import pytest
 from rclpy.parameter import Parameter
 from ros_helpers import BEST_EFFORT, make_image, next_domain_id, running_node, stamp_of
@@ -221,6 +223,11 @@ def test_the_check_reports_rig_off_and_apply_sets_the_pitch(harness):
                 'estimate.rig.rotation_x_deg.tolerance', 'stereo_checks'):
         assert key in diag, key
     assert float(diag['vertical_disparity_rms_px']) > 1.0
+    # The check ran in the node's child process, at nice 19 and SCHED_IDLE.
+    workers = [c for c in psutil.Process(harness.proc.pid).children()
+               if 'stereo_check_worker' in ' '.join(c.cmdline())]
+    assert len(workers) == 1 and workers[0].nice() == 19, workers
+    assert os.sched_getscheduler(workers[0].pid) == os.SCHED_IDLE
     assert abs(float(diag['estimate.rig.rotation_x_deg.value']) - TRUE_PITCH_DEG) < 0.02
     assert harness.client.set_parameters(
         Parameter('stereo_check.apply', Parameter.Type.BOOL, True))[0].successful
