@@ -155,3 +155,13 @@ def test_cli_refusals_exit_2_naming_the_parameter(cli_files, capsys, extra, word
     err = capsys.readouterr().err.strip()
     assert code == 2
     assert len(err.splitlines()) == 1 and words in err, err
+
+
+def test_cli_prints_a_table_without_json(cli_files, capsys):
+    folder, params = cli_files
+    code = main(['stereo-check', '--params', str(params), str(folder / 'l.png'),
+                 str(folder / 'r.png')])
+    out = capsys.readouterr().out
+    assert code == 0
+    assert out.startswith('verdict: rig_off\n')
+    assert 'rig.rotation_x_deg' in out and 'vertical disparity rms' in out
