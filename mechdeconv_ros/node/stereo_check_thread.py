@@ -155,7 +155,9 @@ class StereoCheckThread:
         if self._worker.process is None:
             self._worker.start()
         stereo = active.stereo
-        rig = {k: float(self._value(k)) for k in RIG_NAMES}
+        # The rig the pair in use was built from (not newer values still being built).
+        built = stereo.values or {}
+        rig = {k: float(built.get(k, self._value(k))) for k in RIG_NAMES}
         try:
             reply = self._worker.check(to_grey(left), to_grey(right),
                                        (stereo.left, stereo.right), active.generation, rig,
