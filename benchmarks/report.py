@@ -735,6 +735,12 @@ def stereo_tables(doc: Mapping[str, Any]) -> list[str]:
     if 'check_pairs_share' in targets:
         lines += [f"The check at 1 Hz: {fmt_ratio(targets['check_pairs_share'])} x the pairs "
                   f"per second without it, p50 {targets['check_p50_delta_ms']:+.2f} ms."]
+    if 'latency_ratio_check' in targets:
+        lines += ['With the check on: (node - relay) / two remaps = '
+                  f"{fmt_ratio(targets['latency_ratio_check'])}, "
+                  f"{verdict(targets['latency_met_check'])}; pairs delivered "
+                  f"{100 * targets.get('delivered_stereo_check', float('nan')):.0f} % "
+                  f"(check off: {100 * targets.get('delivered_stereo', float('nan')):.0f} %)."]
     if doc.get('errors'):
         lines += ['', 'Errors: ' + '; '.join(e.splitlines()[0] for e in doc['errors'])]
     if doc.get('machine'):
