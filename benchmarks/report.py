@@ -724,9 +724,11 @@ def stereo_tables(doc: Mapping[str, Any]) -> list[str]:
              f'Two bare remaps (the pair, median): {fmt_ms(remaps)} ms.', '']
     rows = [[names.get(r.get('kind'), r.get('kind')), fmt_num(r.get('pairs_per_s')),
              fmt_ms(r.get('p50_ms')), fmt_ms(r.get('p90_ms')), fmt_ms(r.get('p99_ms')),
-             fmt_ms(r.get('longest_gap_ms'))] for r in child.get('runs', [])]
+             fmt_ms(r.get('longest_gap_ms')),
+             r.get('checks', '-') if r.get('kind') == 'stereo_check' else '-']
+            for r in child.get('runs', [])]
     lines += markdown_table(['process', 'pairs/s', 'p50 ms', 'p90 ms', 'p99 ms',
-                             'longest gap ms'], rows)
+                             'longest gap ms', 'checks done'], rows)
     if 'latency_ratio' in targets:
         lines += ['', f"Target p50 <= relay p50 + {targets['target_remaps']:g} x two remaps "
                   f"({fmt_ms(targets['p50_budget_ms'])} ms): (node - relay) / two remaps = "

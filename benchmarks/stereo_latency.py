@@ -63,6 +63,8 @@ CHILD_TIMEOUT_S = 600.0
 TARGET_REMAPS = 1.5
 #: The kinds measured, in order.
 KINDS = ('relay', 'stereo', 'stereo_check')
+#: What the probe reads of the node's check from /diagnostics.
+CHECK_KEYS = ('stereo_checks', 'stereo_check_ms_last', 'verdict', 'matches')
 
 
 def node_argv(kind: str, size: tuple[int, int]) -> list[str]:
@@ -152,9 +154,23 @@ class PairProbe:
         qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5,
                          reliability=ReliabilityPolicy.BEST_EFFORT)
         self.received: dict[str, dict[int, int]] = {'left': {}, 'right': {}}
+        #: The node's last /diagnostics values of the check (:data:`CHECK_KEYS`).
+        self.check: dict[str, str] = {}
+        from diagnostic_msgs.msg import DiagnosticArray
+        self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
         for side in ('left', 'right'):
             self.node.create_subscription(Image, f'{side}/image_rect',
                                           lambda data, s=side: self._on(s, data), qos, raw=True)
+
+    def _on_diagnostics(self, msg: Any) -> None:
+        for status in msg.status:
+            values = {kv.key: kv.value for kv in status.values if kv.key in CHECK_KEYS}
+            if values:
+                self.check = values
+
+    def checks(self) -> int:
+        """Return how many checks the node reported so far (0 before any)."""
+        return int(self.check.get('stereo_checks', '0') or 0)
 
     def _on(self, side: str, data: bytes) -> None:
         now = time.time_ns()
@@ -239,11 +255,17 @@ def _measure(kind: str, size: tuple[int, int], env: dict[str, str], probe: PairP
             return {'kind': kind}
         probe.spin_for(WARMUP_S if window_s > QUICK_WINDOW_S else 0.2)
         probe.clear()
+        probe.check = {}
         start_ns = time.time_ns()
         probe.spin_for(window_s)
+        checks_before = probe.checks()
         stats = latency_stats(probe.pairs(start_ns), window_s, (start_ns, time.time_ns()))
         stats['pairs_per_s'] = stats.pop('fps')
         stats['kind'] = kind
+        # The checks done by the end of the window (the count since the node started: what
+        # the check cost the frames is only measured if it ran).
+        stats['checks'] = checks_before
+        stats['check_ms_last'] = probe.check.get('stereo_check_ms_last')
         return stats
     finally:
         for child in (pub, proc):
