@@ -83,7 +83,7 @@ def facing(centre: Sequence[float], width_mm: float, height_mm: float, seed: int
                  float(centre[2]) * texel_px / focal_px, seed)
 
 
-def depth_scene(seed: int = 0) -> list[Plane]:
+def depth_scene(seed: int = 0, focal_px: float = 1000.0) -> list[Plane]:
     """
     Return a textured scene with depth from 1.5 to 8 m (mm, left camera frame).
 
@@ -91,19 +91,22 @@ def depth_scene(seed: int = 0) -> list[Plane]:
     ``seed`` so that several scenes give the estimate different matches.
 
     :param seed: placement and textures.
+    :param focal_px: the cameras' focal length: the textures have about 2.5 px texels.
     :return: the planes.
     """
     rng = np.random.default_rng(seed)
     # The back wall is slanted so that its disparity runs through every sub-pixel fraction.
-    planes = [facing((0.0, 0.0, 6500.0), 40000.0, 30000.0, seed * 100 + 1, yaw_deg=-35.0),
+    planes = [facing((0.0, 0.0, 6500.0), 40000.0, 30000.0, seed * 100 + 1, yaw_deg=-35.0,
+                     focal_px=focal_px),
               facing((rng.uniform(-1500, -800), rng.uniform(-300, 300), 5000.0), 1800.0,
-                     2500.0, seed * 100 + 2, yaw_deg=rng.uniform(25.0, 40.0))]
+                     2500.0, seed * 100 + 2, yaw_deg=rng.uniform(25.0, 40.0),
+                     focal_px=focal_px)]
     for k, depth in enumerate((1500.0, 2200.0, 3200.0, 4500.0)):
         half_w = 0.22 * depth
         planes.append(facing((rng.uniform(-half_w, half_w) + 60.0,
                               rng.uniform(-0.15, 0.15) * depth, depth),
                              rng.uniform(0.12, 0.2) * depth, rng.uniform(0.1, 0.16) * depth,
-                             seed * 100 + 3 + k))
+                             seed * 100 + 3 + k, focal_px=focal_px))
     return planes
 
 

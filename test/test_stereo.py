@@ -365,6 +365,23 @@ def test_a_tilted_port_frames_the_pair_by_its_exact_chief_rays(ported):
         assert my.min() >= -0.5 and my.max() <= 119.5
 
 
+def test_a_fisheye_pair_is_framed_inside_its_image_circle():
+    """The image circle inside the sensor: alpha 0 shows only pixels inside it, in both."""
+    single = load_params_file(REPO / 'config' / 'fisheye.yaml')
+    scale = single['sensor.width_px'] / 160.0
+    extra = {f'{camera}.sensor.pixel_size_{axis}_um': single[f'sensor.pixel_size_{axis}_um']
+             * scale for camera in ('left', 'right') for axis in ('x', 'y')}
+    stereo = build_stereo(camera_pair(REPO / 'config' / 'fisheye.yaml', (160, 120), **extra,
+                                      **{'rig.rotation_y_deg': 2.0}))
+    for model, (mx, my) in zip(stereo.models, stereo_maps(stereo)):
+        raw = np.column_stack([mx.ravel(), my.ravel()]).astype(np.float64)
+        assert np.isfinite(directions_of(model, raw)).all()
+        assert mx.min() >= -0.5 and mx.max() <= 159.5 and my.min() >= -0.5
+    # The corners of the raw image lie outside the image circle: not all of it is framed.
+    corner = directions_of(stereo.left, np.array([[-0.5, -0.5]]))
+    assert not np.isfinite(corner).all()
+
+
 def test_lateral_colour_gives_each_channel_its_own_exact_map():
     values = {**pair_of((160, 120)), 'left.lens.glass': 'N-BK7', 'right.lens.glass': 'N-BK7',
               'output.lateral_color_correction': True}

@@ -3,7 +3,7 @@
 """
 A stereo pair without a checkerboard: two lens models, the rig, and the exact rectification.
 
-Frames (docs/design.md section "Stereo"): each camera's optical frame is REP-103's (X right,
+Frames (docs/design.md section 8): each camera's optical frame is REP-103's (X right,
 Y down, Z ahead), with its origin at the camera's paraxial entrance pupil. In the LEFT
 camera's frame the right camera's entrance pupil is at ``t = (baseline, offset_y, offset_z)``
 mm and its axes are the columns of
@@ -29,11 +29,16 @@ CameraInfo convention). A point at depth Z (rectified frame, m) has disparity
 ``u_l - u_r = f B / Z`` px.
 
 ``f`` and the principal point follow ``output.alpha`` over both cameras' raw outlines, seen
-through each camera's exact inverse (:func:`mechdeconv_ros.model.projection.directions_of`)
-(refined on the forward trace for a non-symmetric port, :func:`exact_directions`)
-and turned into the rectified frame: 0 frames the largest window inside both (only pixels
-valid in both images), 1 the smallest window holding all of both; in between, f and the
-window's centre interpolate linearly (as the single camera's ``output.alpha``).
+through each camera's exact inverse (:func:`mechdeconv_ros.model.projection.directions_of`,
+refined on the forward trace for a non-symmetric port, :func:`exact_directions`) and turned
+into the rectified frame: 0 frames the largest window inside both (only pixels valid in both
+images), 1 the smallest window holding all of both; in between, f and the window's centre
+interpolate linearly (as the single camera's ``output.alpha``). Where a fisheye's image
+circle, or 85 deg from the rectified axis (the pinhole limit), ends inside a raw image, its
+outline follows that edge.
+
+A finite ``scene.distance_mm`` (the single camera measures that plane from its front principal
+point H) is converted to the pair's origin E by :func:`pupil_tangent_scale`.
 """
 
 from __future__ import annotations
@@ -52,9 +57,9 @@ import numpy as np
 
 #: Raw outline points per image side that frame the rectified window.
 _OUTLINE_PER_SIDE = 96
-#: Rays closer than this to the rectified image plane (z / |d|, about 87 deg off the
-#: rectified axis) cannot be shown by a pinhole and do not frame the window.
-_MIN_Z = 0.05
+#: Rays closer than this to the rectified image plane (z / |d| = cos 85 deg, the single
+#: camera's pinhole limit) are not framed: the window ends before them.
+_MIN_Z = math.cos(math.radians(85.0))
 
 
 def rig_rotation(rx_deg: float, ry_deg: float, rz_deg: float) -> FloatArray:
@@ -310,12 +315,45 @@ def directions_from_pupil(model: LensModel, pixels: FloatArray) -> FloatArray:
     return d
 
 
+def _pinhole_visible(model: LensModel, rot: FloatArray, pixels: FloatArray) -> FloatArray:
+    """Return whether raw pixels see a direction the rectified pinhole shows (field, 85 deg)."""
+    d = directions_of(model, pixels) @ rot.T
+    with np.errstate(invalid='ignore'):
+        return np.isfinite(d).all(axis=1) & (d[:, 2] > _MIN_Z)
+
+
+def _clipped_to_field(model: LensModel, rot: FloatArray, side: FloatArray) -> FloatArray:
+    """
+    Move outline points the rectified pinhole cannot show inward, to where it can.
+
+    A fisheye's image circle inside the sensor, or a field wider than 85 deg from the
+    rectified axis: each such point moves along its line to the lens axis pixel (bisection,
+    1/4096 of the way) to the last point that is seen; a line never seen is dropped.
+    """
+    bad = ~_pinhole_visible(model, rot, side)
+    if not bad.any():
+        return side
+    centre = model.K[:2, 2]
+    low, high = np.zeros(int(bad.sum())), np.ones(int(bad.sum()))
+    for _ in range(12):
+        mid = 0.5 * (low + high)
+        seen = _pinhole_visible(model, rot, centre + mid[:, None] * (side[bad] - centre))
+        low = np.where(seen, mid, low)
+        high = np.where(seen, high, mid)
+    out = side.copy()
+    out[bad] = centre + low[:, None] * (side[bad] - centre)
+    keep = np.ones(len(side), bool)
+    keep[np.flatnonzero(bad)[low == 0.0]] = False
+    return out[keep]
+
+
 def _rectified_outline(model: LensModel, rot: FloatArray) -> list[FloatArray]:
     """
     Return the raw outline's sides (top, bottom, left, right) in normalised rectified coords.
 
     Each side is ``(N, 2)`` (x/z, y/z) of the directions its pixel edges see, turned by
-    ``rot``; points outside the traced field or near the rectified image plane are dropped.
+    ``rot``; where the traced field or the rectified pinhole's 85 deg end inside the raw image,
+    the side follows that edge instead (:func:`_clipped_to_field`).
     """
     w, h = model.width, model.height
     xs = np.linspace(-0.5, w - 0.5, _OUTLINE_PER_SIDE)
@@ -326,9 +364,9 @@ def _rectified_outline(model: LensModel, rot: FloatArray) -> list[FloatArray]:
              np.stack([np.full_like(ys, w - 0.5), ys], axis=1)]
     out = []
     for side in sides:
-        d = directions_from_pupil(model, side) @ rot.T
+        d = directions_from_pupil(model, _clipped_to_field(model, rot, side)) @ rot.T
         with np.errstate(invalid='ignore'):
-            keep = np.isfinite(d).all(axis=1) & (d[:, 2] > _MIN_Z * np.linalg.norm(d, axis=1))
+            keep = np.isfinite(d).all(axis=1) & (d[:, 2] > 0.5 * _MIN_Z)
         out.append(d[keep, :2] / d[keep, 2:3])
     return out
 
@@ -357,9 +395,9 @@ def rectified_camera(outlines: list[list[FloatArray]], size: tuple[int, int], al
     outer = [math.inf, -math.inf, math.inf, -math.inf]
     for camera, (top, bottom, left, right) in zip(('left', 'right'), outlines):
         if min(len(top), len(bottom), len(left), len(right)) == 0:
-            raise ModelError(f'{camera}.lens.focal_length_mm',
-                             'a side of the raw image sees no direction a pinhole can show '
-                             '(beyond about 87 deg from the rectified axis)')
+            raise ModelError('output.projection',
+                             f'a side of the {camera} raw image sees no direction a pinhole '
+                             'can show (within 85 deg of the rectified axis)')
         inner = [max(inner[0], float(np.max(left[:, 0]))), min(inner[1], float(np.min(
             right[:, 0]))), max(inner[2], float(np.max(top[:, 1]))),
             min(inner[3], float(np.min(bottom[:, 1])))]

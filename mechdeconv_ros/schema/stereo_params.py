@@ -16,7 +16,7 @@ SCHEMA`, so a new camera parameter is a pair parameter twice without an edit her
 - ``sync.slop_s`` (pairing two frames by stamp) and ``stereo_check.rate_hz``,
   ``stereo_check.window``, ``stereo_check.apply`` (the live estimate of the rig's rotation).
 
-Convention of the rig (docs/design.md section "Stereo"): in the left camera's optical frame
+Convention of the rig (docs/design.md section 8, Stereo): in the left camera's optical frame
 (X right, Y down, Z ahead, origin at its paraxial entrance pupil) the right camera's entrance
 pupil is at ``t = (baseline_mm, offset_y_mm, offset_z_mm)`` mm and its axes are the columns of
 ``R = R_x(rotation_x_deg) R_y(rotation_y_deg) R_z(rotation_z_deg)`` (right-handed rotations
