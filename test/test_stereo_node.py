@@ -216,7 +216,9 @@ def test_the_check_reports_rig_off_and_apply_sets_the_pitch(harness):
         Parameter('rig.rotation_x_deg', Parameter.Type.DOUBLE, 0.0),
         Parameter('stereo_check.rate_hz', Parameter.Type.DOUBLE, 2.0))
     assert all(r.successful for r in results)
-    diag = harness.diag(lambda v: v.get('verdict') == 'rig_off', 120.0)
+    # The check judges the pair in use: wait for one checked against the rebuilt (0 deg) pair.
+    diag = harness.diag(lambda v: v.get('verdict') == 'rig_off'
+                        and float(v['vertical_disparity_rms_px']) > 1.0, 120.0)
     assert diag is not None, harness.proc.output()[-3000:]
     for key in ('matches', 'vertical_disparity_rms_px', 'vertical_disparity_rms_px_after',
                 'estimate.rig.rotation_x_deg.value', 'estimate.rig.rotation_x_deg.sigma',
