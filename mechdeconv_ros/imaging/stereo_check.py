@@ -31,8 +31,10 @@ ahead) the right camera's entrance pupil is at ``t = (B, t_y, t_z)`` mm (``rig.b
    finds the inliers (``|r| <`` :data:`INLIER_PX`), then bounded Levenberg-Marquardt over all
    inliers of the pooled pairs, the inliers re-selected at ``max(INLIER_PX, 4 s)`` (``s`` the
    robust scatter) and refitted. Every parameter stays within its tolerance about the
-   description. ``sigma = s_r sqrt(diag((J^T J)^-1))`` (``s_r`` the residual RMS in px, the
-   matches taken as independent); a parameter whose sigma exceeds its tolerance is held at
+   description. Sigma: the larger of ``s_r sqrt(diag((J^T J)^-1))`` (``s_r`` the residual
+   RMS in px, matches independent) and the sandwich estimate clustered by 64 px cell of the
+   left image (:func:`parameter_sigma`: one patch of texture seen in several pooled pairs
+   errs alike); a parameter whose sigma exceeds its tolerance is held at
    the description and the rest refitted: the scene does not measure it (a far, flat scene
    does not measure yaw).
 3. The verdict reads the vertical disparity of the inlier matches in the rectified pair
@@ -81,6 +83,8 @@ FLOOR_PX = 0.3
 AFTER_FACTOR = 2.0
 #: Most SIFT keypoints per frame (the strongest).
 MAX_FEATURES = 4000
+#: Cells (px of the left raw image) whose matches the sigma takes as sharing their errors.
+CELL_PX = 64
 #: Finite-difference steps of the Jacobian (deg for rotations, mm for offsets).
 _STEP = np.array([1e-4, 1e-4, 1e-4, 1e-3, 1e-3])
 
@@ -337,6 +341,39 @@ def ransac_inliers(problem: FitProblem, free: np.ndarray, rng: np.random.Generat
     return best
 
 
+def parameter_sigma(problem: FitProblem, params: np.ndarray, free: np.ndarray,
+                    inliers: np.ndarray) -> np.ndarray:
+    """
+    Return the 1-sigma of the free parameters: the larger of the iid and the cell-clustered one.
+
+    iid: ``s_r sqrt(diag((J^T J)^-1))``. Clustered (the sandwich ``B M B``, ``B = (J^T J)^-1``,
+    ``M = G/(G-1) sum_c (J_c^T r_c)(J_c^T r_c)^T`` over the :data:`CELL_PX` cells ``c`` of the
+    left raw image): matches of one patch of texture share their errors (the same scene in
+    every pooled pair of a still camera), which the iid sigma would count as independent.
+
+    :param problem: the matches.
+    :param params: the fitted parameters.
+    :param free: the free parameters' indices.
+    :param inliers: the inlier mask.
+    :return: ``(len(free),)`` sigmas.
+    """
+    r = problem.residuals(params, inliers)
+    jac = problem.jacobian(params, free, inliers)
+    bread = np.linalg.pinv(jac.T @ jac)
+    s_r = math.sqrt(float(np.sum(r ** 2)) / max(len(r) - free.size, 1))
+    iid = s_r * np.sqrt(np.diag(bread))
+    cells = np.floor(problem.p_l[inliers] / CELL_PX).astype(np.int64)
+    _, cluster = np.unique(cells, axis=0, return_inverse=True)
+    groups = int(cluster.max()) + 1 if len(cluster) else 0
+    if groups < 2:
+        return iid
+    scores = np.zeros((groups, free.size))
+    np.add.at(scores, cluster.reshape(-1), jac * r[:, None])
+    meat = scores.T @ scores * (groups / (groups - 1.0))
+    clustered = np.sqrt(np.abs(np.diag(bread @ meat @ bread)))
+    return np.maximum(iid, clustered)
+
+
 @dataclasses.dataclass
 class StereoCheckResult:
     """One stereo check: the verdict, the matches and the rig's estimate."""
@@ -397,10 +434,7 @@ def fit_rig(problem: FitProblem, seed: int = 0) -> tuple[np.ndarray, np.ndarray,
     for _ in range(5):
         if inliers.sum() <= free.size + 2:
             break
-        r = problem.residuals(params, inliers)
-        jac = problem.jacobian(params, free, inliers)
-        s_r = math.sqrt(float(np.sum(r ** 2)) / max(len(r) - free.size, 1))
-        sig = s_r * np.sqrt(np.diag(np.linalg.pinv(jac.T @ jac)))
+        sig = parameter_sigma(problem, params, free, inliers)
         sigma[free] = sig
         seen = free[sig <= problem.tolerance[free]]
         if seen.size == free.size:
