@@ -18,6 +18,7 @@ and no estimate. ``mechdeconv stereo-check --json`` prints the same result; its 
 
 from __future__ import annotations
 
+import functools
 import json
 
 import cv2
@@ -52,14 +53,19 @@ def rig_values(values: dict) -> dict:
     return {k: v for k, v in values.items() if k.startswith('rig.')}
 
 
+@functools.lru_cache(maxsize=None)
+def rendered_pair(case: str, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Return the raw pair of scene ``seed`` on the true rig ``case`` (rendered once)."""
+    rx, ry, rz = TRUE[case]
+    rig = {'rig.rotation_x_deg': rx, 'rig.rotation_y_deg': ry, 'rig.rotation_z_deg': rz,
+           'rig.offset_y_mm': 0.3}
+    return render_pair(LENSES, rig, depth_scene(seed), SIZE)[:2]
+
+
 @pytest.fixture(scope='module', params=sorted(TRUE), ids=sorted(TRUE))
 def rendered(request):
     """Return :data:`PAIRS` raw pairs of different scenes on the true rig, and the truth."""
-    rx, ry, rz = TRUE[request.param]
-    rig = {'rig.rotation_x_deg': rx, 'rig.rotation_y_deg': ry, 'rig.rotation_z_deg': rz,
-           'rig.offset_y_mm': 0.3}
-    pairs = [render_pair(LENSES, rig, depth_scene(seed), SIZE)[:2] for seed in range(PAIRS)]
-    return pairs, (rx, ry, rz)
+    return [rendered_pair(request.param, seed) for seed in range(PAIRS)], TRUE[request.param]
 
 
 def test_the_rotation_is_measured_and_the_applied_estimate_aligns_the_rows(rendered):
@@ -83,9 +89,7 @@ def test_the_rotation_is_measured_and_the_applied_estimate_aligns_the_rows(rende
 @pytest.fixture(scope='module')
 def textured():
     """One pair of the true rig 'corner' (for the one-sided and CLI tests)."""
-    rx, ry, rz = TRUE['corner']
-    rig = {'rig.rotation_x_deg': rx, 'rig.rotation_y_deg': ry, 'rig.rotation_z_deg': rz}
-    return render_pair(LENSES, rig, depth_scene(0), SIZE)[:2]
+    return rendered_pair('corner', 0)
 
 
 @pytest.mark.parametrize('case', ['featureless', 'one_camera_blind', 'left_half_only'],
