@@ -9,7 +9,10 @@ no conversion: one comparison and two assignments on the frame path) and wakes t
 (``mechdeconv-stereo-check``). The thread turns them into 8-bit grey (OpenCV, interpreter lock
 released) and hands them to the child process
 (:class:`~mechdeconv_ros.runtime.stereo_check_worker.StereoCheckWorker`, nice 19, SCHED_IDLE),
-waiting for the reply with the lock released; the child matches the pair, pools the last
+waiting for the reply with the lock released. While a check is in the child the frame path
+stops it for the time it rectifies and publishes a pair (:meth:`StereoCheckThread.hold` and
+:meth:`~StereoCheckThread.release`: SIGSTOP, SIGCONT), so it runs between pairs only. The
+child matches the pair, pools the last
 ``stereo_check.window`` pairs and fits the rig. A child that dies is restarted up to
 :data:`MAX_RESTARTS` times.
 
@@ -79,6 +82,7 @@ class StereoCheckThread:
         self._last_offer = -math.inf
         self._worker = StereoCheckWorker()
         self._restarts = 0
+        self._busy = False      # a check is in the child (the frame path holds it meanwhile)
         self.checks = 0
         self.applied = 0
         self._to_apply: dict[str, float] = {}
@@ -113,6 +117,16 @@ class StereoCheckThread:
         with self._cond:
             self._pending = (left, right, active)
             self._cond.notify()
+
+    def hold(self) -> None:
+        """Stop the child while the frame path rectifies a pair (only during a check)."""
+        if self._busy:
+            self._worker.pause(True)
+
+    def release(self) -> None:
+        """Let the child go on after the pair is published."""
+        if self._worker.paused:
+            self._worker.pause(False)
 
     def settings_changed(self) -> None:
         """Read ``stereo_check.rate_hz`` again (executor thread, after a set)."""
@@ -155,13 +169,12 @@ class StereoCheckThread:
         if self._worker.process is None:
             self._worker.start()
         stereo = active.stereo
-        # The rig the pair in use was built from (not newer values still being built).
-        built = stereo.values or {}
-        rig = {k: float(built.get(k, self._value(k))) for k in RIG_NAMES}
+        sizes = ((stereo.left.width, stereo.left.height),
+                 (stereo.right.width, stereo.right.height))
+        grey = (to_grey(left), to_grey(right))
+        self._busy = True
         try:
-            reply = self._worker.check(to_grey(left), to_grey(right),
-                                       (stereo.left, stereo.right), active.generation, rig,
-                                       float(stereo.K_rect[1, 1]),
+            reply = self._worker.check(*grey, dict(stereo.values), sizes, active.generation,
                                        int(self._value('stereo_check.window')))
         except WorkerGone as err:
             self._worker.stop()
@@ -170,6 +183,9 @@ class StereoCheckThread:
                 self._rate = 0.0
             self._node.get_logger().error(f'stereo check: {err}; restarts {self._restarts}')
             return
+        finally:
+            self._busy = False
+            self._worker.pause(False)
         if 'error' in reply:
             self._node.get_logger().error(f"stereo check: {reply['error']}",
                                           throttle_duration_sec=30.0)

@@ -24,7 +24,8 @@ pair record (``StereoLive.active``: model, rectifier, CameraInfos; everything af
 only, so no published pair mixes two models), both images rectified into pooled output
 messages, ``left/image_rect`` and ``right/image_rect`` published with their own inputs'
 headers, then the four CameraInfos (restamped with their side's header), then the offer to the
-check (references, at most ``stereo_check.rate_hz``).
+check (references, at most ``stereo_check.rate_hz``). While a check is in its child process,
+the child is stopped from before the remap to after the CameraInfos (SIGSTOP, SIGCONT).
 """
 
 from __future__ import annotations
@@ -165,6 +166,7 @@ class StereoNode(Node):
             out_r = self._pools['right'].get(active.stereo.width, active.stereo.height,
                                              enc_r.name)
             colours = COLOUR_ORDER.get(enc_l.name) if enc_l.name == enc_r.name else None
+            self._check.hold()          # the check's child waits while a pair is made
             active.rectifier.rectify(left, right, colours=colours,
                                      dst=(out_l.pixels, out_r.pixels))
             out_l.msg.header, out_r.msg.header = h_l, h_r
@@ -173,11 +175,14 @@ class StereoNode(Node):
             for key, info in active.extras.items():
                 info.header = h_l if key.startswith('left') else h_r
                 self._pub_infos[key].publish(info)
+            self._check.release()
             self._check.offer(left, right, active, copy=(reused_l, reused_r))
         except ValueError as err:       # a frame size that is not its camera's
+            self._check.release()
             stats.frames_dropped += 1
             return self._frame_error('size', f'pair dropped: {err}')
         except Exception as err:        # noqa: B902 - one bad pair must not stop the stream
+            self._check.release()
             stats.frames_failed += 1
             return self._frame_error('rectification', f'rectification failed: {err!r}')
         stats.frames_out += 1

@@ -10,35 +10,41 @@ process it would hold the interpreter lock the frame path needs. The child (``py
 :class:`subprocess.Popen`, so it inherits no ROS state, only its socket) lowers itself to nice
 19 and the SCHED_IDLE policy (a core only when no thread of the node wants one), runs OpenCV
 on one thread, ignores SIGINT, lives in a session of its own, exits when its socket closes
-and asks Linux to kill it when its parent dies (PR_SET_PDEATHSIG).
+and asks Linux to kill it when its parent dies (PR_SET_PDEATHSIG). While the node rectifies
+and publishes a pair it stops the child (:meth:`StereoCheckWorker.pause`, SIGSTOP/SIGCONT:
+two system calls per pair, only while a check is in progress), so the check runs only in the
+time between pairs: SCHED_IDLE alone left it the memory bandwidth and cache the remap needs.
 
 Protocol (a :class:`multiprocessing.connection.Connection` on a Unix socket pair, one request
-and one reply at a time): a pickled header ``{'shapes', 'models', 'generation', 'rig',
-'fy_rect', 'window'}`` and then the two 8-bit grey frames' bytes (``send_bytes``, not pickled);
-``models`` is ``(left, right)`` lens models only when the generation changed (about 100 kB),
-else None. The child keeps the matched RAW pixels of the last ``window`` pairs (raw pixels
-stay valid when the lenses' description changes: they are mapped to directions again by the
-current models at each check; a new raw size clears them). Reply:
+and one reply at a time): a pickled header ``{'shapes', 'values', 'sizes', 'generation',
+'window'}`` and then the two 8-bit grey frames' bytes (``send_bytes``, not pickled).
+``values`` are the pair's parameter values the pair in use was built from, sent only when
+the generation changed: the child builds the pair's model itself
+(:func:`~mechdeconv_ros.model.stereo.build_stereo` at the raw ``sizes``, at its idle
+priority). Pickling the two lens models instead held the node's interpreter lock for tens of
+milliseconds: a frame's worth. The child keeps the matched RAW pixels of the last ``window``
+pairs (raw pixels stay valid when the lenses' description changes: they are mapped to
+directions again by the current models at each check; a new raw size clears them). Reply:
 ``{'result': StereoCheckResult.as_dict(), 'pairs': n, 'ms': float}`` or ``{'error': repr}``.
 """
 
 from __future__ import annotations
 
 from collections import deque
-import copy
 import ctypes
-import dataclasses
 import os
 from pathlib import Path
 import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from typing import Any
 
 import cv2
 from mechdeconv_ros.imaging.stereo_check import check_pairs, match_pixels
+from mechdeconv_ros.model.stereo import build_stereo
 import numpy as np
 
 #: Linux prctl option: the signal a child gets when its parent (thread) dies.
@@ -56,27 +62,12 @@ class WorkerGone(RuntimeError):
     """The stereo check's child process exited or its pipe broke."""
 
 
-def portable(model: Any) -> Any:
-    """
-    Return a shallow copy of a lens model without its lazily filled caches, to pickle.
-
-    :param model: a LensModel.
-    :return: the copy.
-    """
-    out = copy.copy(model)
-    if dataclasses.is_dataclass(out):
-        for item in dataclasses.fields(out):
-            if item.name.endswith('_cache'):
-                object.__setattr__(out, item.name, {})
-    return out
-
-
 class PairWindow:
-    """The child's state: the current models and the matched pixels of recent pairs."""
+    """The child's state: the pair's model and the matched pixels of recent pairs."""
 
     def __init__(self) -> None:
         """Start empty."""
-        self.models: tuple[Any, Any] | None = None
+        self.stereo: Any = None
         self._window: deque[tuple[np.ndarray, np.ndarray]] = deque()
         self._shapes: Any = None
 
@@ -91,17 +82,20 @@ class PairWindow:
         :return: the reply.
         """
         start = time.perf_counter()
-        if header['models'] is not None:
-            self.models = header['models']
+        if header['values'] is not None:
+            self.stereo = None      # free the old model first
+            sizes = header['sizes']
+            self.stereo = build_stereo(header['values'], tuple(sizes[0]), tuple(sizes[1]))
         if header['shapes'] != self._shapes:
             self._window.clear()
             self._shapes = header['shapes']
         self._window.append(match_pixels(left, right))
         while len(self._window) > int(header['window']):
             self._window.popleft()
-        left_model, right_model = self.models
-        result = check_pairs(left_model, right_model, header['rig'], list(self._window),
-                             float(header['fy_rect']), matched=True)
+        stereo = self.stereo
+        rig = {k: float(v) for k, v in stereo.values.items() if k.startswith('rig.')}
+        result = check_pairs(stereo.left, stereo.right, rig, list(self._window),
+                             float(stereo.K_rect[1, 1]), matched=True)
         return {'result': result.as_dict(), 'pairs': len(self._window),
                 'ms': (time.perf_counter() - start) * 1e3}
 
@@ -145,6 +139,30 @@ class StereoCheckWorker:
         self.process: subprocess.Popen | None = None
         self._conn: Any = None
         self._generation: int | None = None
+        #: Whether the child is stopped (SIGSTOP) by :meth:`pause`.
+        self.paused = False
+        self._signal_lock = threading.Lock()
+
+    def pause(self, paused: bool) -> None:
+        """
+        Stop (SIGSTOP) or continue (SIGCONT) the child; nothing if it is already so or gone.
+
+        A stopped child uses no CPU, no memory bandwidth and no cache: what its SCHED_IDLE
+        priority alone cannot give the frame path (a 720p SIFT evicts the remap's maps).
+        Safe from any thread.
+
+        :param paused: True to stop it, False to continue it.
+        """
+        with self._signal_lock:
+            process = self.process
+            if process is None or paused == self.paused or process.poll() is not None:
+                self.paused = paused and process is not None and process.poll() is None
+                return
+            try:
+                process.send_signal(signal.SIGSTOP if paused else signal.SIGCONT)
+            except OSError:
+                return
+            self.paused = paused
 
     def start(self) -> None:
         """Start a fresh child (no models, no window)."""
@@ -165,28 +183,26 @@ class StereoCheckWorker:
         self._conn = Connection(parent.detach())
         self._generation = None
 
-    def check(self, left: np.ndarray, right: np.ndarray, models: tuple[Any, Any],
-              generation: int, rig: dict[str, float], fy_rect: float,
+    def check(self, left: np.ndarray, right: np.ndarray, values: dict[str, Any],
+              sizes: tuple[tuple[int, int], tuple[int, int]], generation: int,
               window: int) -> dict[str, Any]:
         """
         Check one grey raw pair in the child; block (interpreter lock released) for the reply.
 
         :param left: the left 8-bit grey raw frame.
         :param right: the right one.
-        :param models: ``(left, right)`` lens models of the pair in use.
-        :param generation: their generation (models are sent when it changes).
-        :param rig: the rig's values (``rig.*``, ``rig.tolerance.*``).
-        :param fy_rect: the rectified focal length (px).
+        :param values: the pair's values the pair in use was built from (``StereoModel.values``).
+        :param sizes: the raw ``(width, height)`` of the left and the right camera.
+        :param generation: their generation (values are sent when it changes).
         :param window: pairs to pool.
         :return: the reply (module docstring).
         :raises WorkerGone: if the child exited or the pipe broke.
         """
         if self.process is None or self.process.poll() is not None:
             raise WorkerGone('the stereo check process is not running')
-        new = None if generation == self._generation else tuple(portable(m) for m in models)
-        header = {'shapes': (left.shape[:2], right.shape[:2]), 'models': new,
-                  'generation': generation, 'rig': dict(rig), 'fy_rect': float(fy_rect),
-                  'window': int(window)}
+        new = None if generation == self._generation else dict(values)
+        header = {'shapes': (left.shape[:2], right.shape[:2]), 'values': new, 'sizes': sizes,
+                  'generation': generation, 'window': int(window)}
         data = np.concatenate([np.ascontiguousarray(left).reshape(-1),
                                np.ascontiguousarray(right).reshape(-1)])
         try:
@@ -201,8 +217,11 @@ class StereoCheckWorker:
         return reply
 
     def stop(self) -> None:
-        """Stop the child (SIGTERM, then SIGKILL) and close the pipe."""
-        process, self.process = self.process, None
+        """Stop the child (SIGCONT if paused, SIGTERM, then SIGKILL) and close the pipe."""
+        self.pause(False)
+        with self._signal_lock:
+            process, self.process = self.process, None
+            self.paused = False
         if process is not None and process.poll() is None:
             process.terminate()
             try:
