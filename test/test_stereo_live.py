@@ -143,3 +143,41 @@ def test_a_set_that_changes_no_model_value_builds_nothing(live):
     time.sleep(0.1)
     assert len(builder.calls) == builds and pair.active.generation == 0
     assert pair.value('sync.slop_s') == 0.02
+
+
+# --- the check's child process ---------------------------------------------------------------
+
+def test_the_check_child_pools_its_window_pauses_and_stops():
+    """Protocol: values once per generation, the window grows to its size; SIGSTOP, exit."""
+    import cv2
+    import numpy as np
+    from mechdeconv_ros.runtime.stereo_check_worker import StereoCheckWorker
+
+    size = (320, 240)
+    values = check_stereo_values({f'{s}.{k}': v for s in ('left', 'right') for k, v in (
+        ('sensor.width_px', size[0]), ('sensor.height_px', size[1]),
+        ('sensor.pixel_size_x_um', 12.0), ('sensor.pixel_size_y_um', 12.0),
+        ('scene.distance_mm', 0.0))})
+    rng = np.random.default_rng(0)
+    image = cv2.GaussianBlur(rng.integers(0, 256, (size[1], size[0]), dtype=np.uint8),
+                             (0, 0), 1.5)
+    worker = StereoCheckWorker()
+    worker.start()
+    try:
+        replies = [worker.check(image, image, values, (size, size), 0, 2) for _ in range(3)]
+        assert [r['pairs'] for r in replies] == [1, 2, 2], replies
+        assert replies[-1]['result']['verdict'] in ('ok', 'not_enough_matches')
+        stat = f'/proc/{worker.process.pid}/stat'
+
+        def state() -> str:
+            with open(stat) as f:
+                return f.read().rsplit(')', 1)[1].split()[0]
+
+        worker.pause(True)
+        assert worker.paused and wait_for(lambda: state() == 'T', 5.0)
+        worker.pause(False)
+        assert not worker.paused and wait_for(lambda: state() != 'T', 5.0)
+        process = worker.process
+    finally:
+        worker.stop()
+    assert process.returncode is not None and worker.process is None
