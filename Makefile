@@ -23,7 +23,7 @@ $(STAMP): requirements.txt requirements-test.txt setup.py setup.cfg package.xml
 	$(PY) -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation -e .
 	# ament_python puts the executables in lib/mechdeconv_ros (where `ros2 run` looks);
 	# link them onto the venv's PATH as well.
-	for exe in correct_node mechdeconv demo_camera; do \
+	for exe in correct_node stereo_node mechdeconv demo_camera; do \
 	  ln -sf ../lib/mechdeconv_ros/$$exe $(VENV)/bin/$$exe; done
 	touch $(STAMP)
 

@@ -32,6 +32,7 @@ setup(
     entry_points={
         'console_scripts': [
             'correct_node = mechdeconv_ros.node.entry:correct_node',
+            'stereo_node = mechdeconv_ros.node.entry:stereo_node',
             'mechdeconv = mechdeconv_ros.tools.cli:main',
             'demo_camera = mechdeconv_ros.tools.demo_camera:main',
         ],

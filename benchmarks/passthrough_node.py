@@ -32,8 +32,12 @@ stages as correct_node does (:mod:`mechdeconv_ros.node.stage_clock`).
 
 Run::
 
-    python -m benchmarks.passthrough_node [--executor single|multi] [--upto RUNG]
+    python -m benchmarks.passthrough_node [--executor single|multi] [--upto RUNG] [--stereo]
         [--ros-args ...]
+
+``--stereo`` relays two streams instead (``left/image_raw`` -> ``left/image_rect`` and
+``right/image_raw`` -> ``right/image_rect``, each message republished as it is, one callback
+group): the baseline of stereo_node (:mod:`benchmarks.stereo_latency`).
 
 ``--executor multi`` uses a two-thread MultiThreadedExecutor (default: single, the cheapest
 relay, as correct_node). SIGINT stops it with exit code 0.
@@ -149,12 +153,30 @@ class PassthroughNode(Node):
         super().destroy_node()
 
 
+class StereoRelay(Node):
+    """Republish ``left/image_raw`` and ``right/image_raw`` on their ``image_rect``."""
+
+    def __init__(self) -> None:
+        """Create both publishers and subscriptions."""
+        super().__init__('passthrough_node')
+        self.frames = 0
+        for side in ('left', 'right'):
+            pub = self.create_publisher(Image, f'{side}/image_rect', sensor_qos())
+            self.create_subscription(Image, f'{side}/image_raw',
+                                     lambda msg, pub=pub: self._relay(pub, msg), sensor_qos())
+
+    def _relay(self, pub: Any, msg: Image) -> None:
+        self.frames += 1
+        pub.publish(msg)
+
+
 def main(argv: list[str] | None = None) -> None:
     """Run until SIGINT (exit code 0)."""
     argv = list(sys.argv if argv is None else argv)
     parser = argparse.ArgumentParser(description='pass-through image relay')
     parser.add_argument('--executor', choices=('single', 'multi'), default='single')
     parser.add_argument('--upto', choices=RUNGS, default='relay')
+    parser.add_argument('--stereo', action='store_true', help='relay left/ and right/')
     args, ros_args = parser.parse_known_args(rclpy.utilities.remove_ros_args(argv)[1:])
     if ros_args:
         parser.error(f'unknown arguments {ros_args}')
@@ -165,7 +187,7 @@ def main(argv: list[str] | None = None) -> None:
     rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     try:
-        node = PassthroughNode(args.upto)
+        node = StereoRelay() if args.stereo else PassthroughNode(args.upto)
         executor = (MultiThreadedExecutor(num_threads=2) if args.executor == 'multi'
                     else SingleThreadedExecutor())
         executor.add_node(node)

@@ -707,6 +707,49 @@ def node_tables(doc: Mapping[str, Any]) -> list[str]:
     return lines
 
 
+def stereo_tables(doc: Mapping[str, Any]) -> list[str]:
+    """
+    Return the markdown of the stereo benchmark (:mod:`benchmarks.stereo_latency`).
+
+    :param doc: its results document.
+    :return: lines.
+    """
+    child = doc.get('child') or {}
+    targets = doc.get('targets') or {}
+    remaps = (child.get('bare_two_remaps_ms') or {}).get('median')
+    names = {'relay': 'relay of two streams', 'stereo': 'stereo_node',
+             'stereo_check': 'stereo_node, check at 1 Hz'}
+    lines = [f"### stereo_node: 2 x {child.get('size', '?')} rgb8 at "
+             f"{doc.get('rate_hz', 30):g} Hz", '',
+             f'Two bare remaps (the pair, median): {fmt_ms(remaps)} ms.', '']
+    rows = [[names.get(r.get('kind'), r.get('kind')), fmt_num(r.get('pairs_per_s')),
+             fmt_ms(r.get('p50_ms')), fmt_ms(r.get('p90_ms')), fmt_ms(r.get('p99_ms')),
+             fmt_ms(r.get('longest_gap_ms')),
+             r.get('checks', '-') if r.get('kind') == 'stereo_check' else '-']
+            for r in child.get('runs', [])]
+    lines += markdown_table(['process', 'pairs/s', 'p50 ms', 'p90 ms', 'p99 ms',
+                             'longest gap ms', 'checks done'], rows)
+    if 'latency_ratio' in targets:
+        lines += ['', f"Target p50 <= relay p50 + {targets['target_remaps']:g} x two remaps "
+                  f"({fmt_ms(targets['p50_budget_ms'])} ms): (node - relay) / two remaps = "
+                  f"{fmt_ratio(targets['latency_ratio'])}, "
+                  f"{verdict(targets['latency_met'])}."]
+    if 'check_pairs_share' in targets:
+        lines += [f"The check at 1 Hz: {fmt_ratio(targets['check_pairs_share'])} x the pairs "
+                  f"per second without it, p50 {targets['check_p50_delta_ms']:+.2f} ms."]
+    if 'latency_ratio_check' in targets:
+        lines += ['With the check on: (node - relay) / two remaps = '
+                  f"{fmt_ratio(targets['latency_ratio_check'])}, "
+                  f"{verdict(targets['latency_met_check'])}; pairs delivered "
+                  f"{100 * targets.get('delivered_stereo_check', float('nan')):.0f} % "
+                  f"(check off: {100 * targets.get('delivered_stereo', float('nan')):.0f} %)."]
+    if doc.get('errors'):
+        lines += ['', 'Errors: ' + '; '.join(e.splitlines()[0] for e in doc['errors'])]
+    if doc.get('machine'):
+        lines += ['', f"Machine: {machine_line(doc['machine'])}."]
+    return lines + ['']
+
+
 # ---------------------------------------------------------------------------------------------
 # Soak
 # ---------------------------------------------------------------------------------------------

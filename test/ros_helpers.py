@@ -129,7 +129,8 @@ class NodeProcess(Child):
 
 @contextlib.contextmanager
 def running_node(argv: Sequence[str], domain: int, log_dir: Path,
-                 answer_timeout: float = 15.0) -> Iterator[tuple[NodeProcess, RosClient]]:
+                 answer_timeout: float = 15.0, node_name: str = NODE_NAME
+                 ) -> Iterator[tuple[NodeProcess, RosClient]]:
     """
     Run a node until the block ends, then stop it by SIGINT and assert a clean exit.
 
@@ -137,10 +138,11 @@ def running_node(argv: Sequence[str], domain: int, log_dir: Path,
     :param domain: its ``ROS_DOMAIN_ID``.
     :param log_dir: where its logs go.
     :param answer_timeout: seconds the node may take to answer its first service call.
+    :param node_name: the node's name (its parameter services).
     :return: the process and a client already talking to it.
     """
     with NodeProcess(argv, ros_env(domain), log_dir) as proc:
-        client = RosClient(domain)
+        client = RosClient(domain, node_name=node_name)
         try:
             client.wait_until_answering(timeout=answer_timeout)
             yield proc, client

@@ -17,7 +17,7 @@ import json
 import math
 from pathlib import Path
 
-from benchmarks import accuracy, node_latency, report, run_all, speed
+from benchmarks import accuracy, node_latency, report, run_all, speed, stereo_latency
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest
@@ -113,6 +113,34 @@ def test_node_latency_quick(tmp_path):
     assert (tmp_path / 'node_latency.json').exists()
     lines = report.node_tables(doc)
     assert any('pass-through' in line for line in lines)
+
+
+@pytest.mark.ros
+def test_stereo_latency_quick(tmp_path):
+    """The relay of two streams, stereo_node and stereo_node with its check all deliver pairs."""
+    doc = stereo_latency.run(tmp_path, quick=True)
+    assert doc['errors'] == []
+    child = doc['child']
+    assert all(e['exit_code'] == 0 for e in child['exit_codes']), child['exit_codes']
+    assert [r['kind'] for r in child['runs']] == list(stereo_latency.KINDS)
+    assert all(r['pairs_per_s'] > 5.0 for r in child['runs']), child['runs']
+    assert child['bare_two_remaps_ms']['median'] > 0.0
+    assert math.isfinite(doc['targets']['latency_ratio'])
+    assert (tmp_path / 'stereo_latency.json').exists()
+    assert any('relay of two streams' in line for line in report.stereo_tables(doc))
+
+
+def test_stereo_latency_ratio_is_the_node_over_the_relay_in_two_remaps():
+    child = {'bare_two_remaps_ms': {'median': 4.0},
+             'runs': [{'kind': 'relay', 'p50_ms': 10.0, 'pairs_per_s': 30.0},
+                      {'kind': 'stereo', 'p50_ms': 16.0, 'pairs_per_s': 30.0},
+                      {'kind': 'stereo_check', 'p50_ms': 17.0, 'pairs_per_s': 29.4}]}
+    targets = stereo_latency.evaluate(child)
+    assert targets['latency_ratio'] == pytest.approx(1.5) and targets['latency_met']
+    assert targets['p50_budget_ms'] == pytest.approx(16.0)
+    assert targets['check_pairs_share'] == pytest.approx(0.98)
+    child['runs'][1]['p50_ms'] = 16.5
+    assert not stereo_latency.evaluate(child)['latency_met']
 
 
 def test_serial_bound_is_one_frame_of_relay_plus_one_remap():

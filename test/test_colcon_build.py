@@ -90,6 +90,10 @@ def test_build_installs_the_executable_and_the_config(install: Path) -> None:
     for name in ('case2.yaml', 'fastdds_shm.xml'):
         assert (share / 'config' / name).is_file(), name
     assert (share / 'launch' / 'correct.launch.py').is_file()
+    # The stereo node (issue 38): its console script, launch file and example pair.
+    assert os.access(install / PACKAGE / 'lib' / PACKAGE / 'stereo_node', os.X_OK)
+    assert (share / 'launch' / 'stereo.launch.py').is_file()
+    assert (share / 'config' / 'stereo.yaml').is_file()
     assert (install / PACKAGE / 'share' / 'ament_index' / 'resource_index' / 'packages'
             / PACKAGE).is_file()
     # Every layer subpackage is shipped, each with its __init__.py.

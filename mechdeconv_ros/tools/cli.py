@@ -13,6 +13,7 @@ Commands::
     mechdeconv vignetting --params FILE [--png OUT.png] [--lensfun]
     mechdeconv check --params P [--json] IMAGE...
     mechdeconv stereo --params STEREO.yaml LEFT.png RIGHT.png -o DIR   (a rectified pair)
+    mechdeconv stereo-check --params STEREO.yaml [--json] LEFT1 RIGHT1 [LEFT2 RIGHT2 ...]
     mechdeconv import LENS.zmx -o lens.yaml [--wavelength-nm NM]
     mechdeconv import TABLE.csv --focal-length-mm F -o lens.yaml
 
@@ -358,6 +359,25 @@ def cmd_stereo(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_stereo_check(args: argparse.Namespace) -> int:
+    """Measure the rig's rotation from raw pairs (:mod:`mechdeconv_ros.tools.stereo_check_cli`)."""
+    from mechdeconv_ros.tools.stereo_check_cli import print_result, run_stereo_check
+    from mechdeconv_ros.tools.stereo_cli import pair_values
+    try:
+        values = pair_values(args.params, args.param or [])
+    except ValueError as err:
+        raise UsageError(str(err)) from None
+    images = [_read(Path(name)) for name in args.images]
+    try:
+        result = run_stereo_check(values, images, args.images)
+    except ModelError:
+        raise
+    except ValueError as err:
+        raise UsageError(str(err)) from None
+    print_result(result, args.json, sys.stdout)
+    return 0
+
+
 def _one_line(err: BaseException) -> str:
     """Return an exception's message on one line (YAML and OpenCV messages span several)."""
     return ' '.join(part.strip() for part in str(err).splitlines() if part.strip())
@@ -596,6 +616,8 @@ def build_parser() -> argparse.ArgumentParser:
     check.set_defaults(func=cmd_check)
     from mechdeconv_ros.tools.stereo_cli import add_stereo_parser
     add_stereo_parser(sub).set_defaults(func=cmd_stereo)
+    from mechdeconv_ros.tools.stereo_check_cli import add_stereo_check_parser
+    add_stereo_check_parser(sub).set_defaults(func=cmd_stereo_check)
     lens_import = sub.add_parser(
         'import', help='write a params file from a .zmx lens file or a datasheet CSV table',
         description='Write a ROS 2 params file (prescription mode) from a Zemax .zmx lens '
