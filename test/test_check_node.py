@@ -140,9 +140,13 @@ def test_node_check_diagnostics_warn_and_apply(tmp_path: Any) -> None:
             0].successful       # the next checks at once
         done = int(check_status(1)[1]['checks'])
         workers[0].kill()
+        # (/diagnostics lags the checks by up to a second: a check the killed child finished
+        # before it died may still arrive; wait for the restart itself, then a check after it.)
+        assert feed_until(lambda: 'restarting it (1 of 3)' in proc.output(), 60.0), \
+            proc.output()[-3000:]
+        done = int(check_status(1)[1]['checks'])
         assert feed_until(lambda: check_status(done + 1) is not None, 60.0), \
             proc.output()[-3000:]
-        assert 'restarting it (1 of 3)' in proc.output()
         workers = [c for c in psutil.Process(proc.pid).children()
                    if 'check_worker' in ' '.join(c.cmdline())]
         assert len(workers) == 1 and workers[0].nice() == 19, workers
