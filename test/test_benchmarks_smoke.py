@@ -273,3 +273,22 @@ def test_real_lenses_quick(tmp_path):
     kinds = {'fisheye', 'wide-angle', 'normal', 'short tele', 'zoom'}
     assert {r['category'] for r in doc['lenses']} >= kinds
     assert doc['evidence']['lensfun_check_px'] < 0.1  # of 2000 px: float32, pixel centres
+
+
+@pytest.mark.ros
+def test_check_ab_quick(tmp_path):
+    """The check's A/B runs one node, windows off/on/off/on, and writes what the report needs."""
+    from benchmarks import check_ab
+    doc = check_ab.run(tmp_path, quick=True)
+    assert doc['errors'] == [], doc['errors']
+    saved = json.loads((tmp_path / 'check_ab.json').read_text())
+    (size, entry), = saved['sizes'].items()
+    assert [w['state'] for w in entry['windows']] == list(check_ab.WINDOWS)
+    for window in entry['windows']:
+        assert window['fps'] > 5.0, window
+        for key in ('p50_ms', 'checks', 'check_cpu_s', 'check_deferred', 'others_cores'):
+            assert key in window, key
+    verdict, = saved['verdicts'].values()
+    assert verdict['size'] == size and len(verdict['checks_per_on_window']) == 2
+    text = '\n'.join(report.check_ab_tables(saved))
+    assert "checks per 'on' window" in text and size in text

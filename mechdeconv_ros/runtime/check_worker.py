@@ -48,6 +48,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from typing import Any, Callable
 
@@ -167,6 +168,11 @@ class CheckWorker:
         self.process: subprocess.Popen | None = None
         #: Whether the child is stopped by :meth:`pause` (SIGSTOP) and not yet resumed.
         self.paused = False
+        # Issue 36: the child is stopped while the gate pauses it OR a frame is in flight
+        # (:meth:`hold`, from the frame path); one lock orders the two callers' signals.
+        self._frame_hold = False
+        self._stopped = False
+        self._signal_lock = threading.Lock()
         self._conn: Any = None
         self._held: dict[int, Any] = {}    # token -> model, as the child holds them
         self._next_token = 0
@@ -193,7 +199,7 @@ class CheckWorker:
             child.close()
         self._conn = Connection(parent.detach())
         self._held = {}
-        self.paused = False
+        self.paused = self._frame_hold = self._stopped = False
 
     def _token(self, model: Any, taken: int = 0) -> int:
         """Return the token of a model the child holds, else a new one (above ``taken``)."""
@@ -249,24 +255,52 @@ class CheckWorker:
         Stop (SIGSTOP) or continue (SIGCONT) the child; nothing if it is already so or gone.
 
         A stopped child holds its memory and its place in a check; it uses no CPU, no memory
-        bandwidth, no cache (what its priority alone could not give the frame path).
+        bandwidth, no cache (what its priority alone could not give the frame path). It stays
+        stopped while :meth:`hold` holds it.
 
         :param paused: True to stop it, False to continue it.
         """
+        with self._signal_lock:
+            if self.process is None or paused == self.paused:
+                return
+            self.paused = paused
+            self._signal()
+
+    def hold(self, held: bool) -> None:
+        """
+        Stop the child while a frame is in flight (True), let it run again after (False).
+
+        Called by the node's frame path (issue 36): a signal per change, about 5 us; the
+        child's state is ``paused or held``. The frame path always releases what it held, so
+        a held child never waits longer than one frame.
+
+        :param held: True at a frame's start, False at its end.
+        """
+        with self._signal_lock:
+            if self.process is None or held == self._frame_hold:
+                return
+            self._frame_hold = held
+            self._signal()
+
+    def _signal(self) -> None:
+        """Send SIGSTOP / SIGCONT when ``paused or held`` differs from the child's state."""
+        stop = self.paused or self._frame_hold
         process = self.process
-        if process is None or paused == self.paused:
+        if process is None or stop == self._stopped:
             return
         try:
-            process.send_signal(signal.SIGSTOP if paused else signal.SIGCONT)
+            process.send_signal(signal.SIGSTOP if stop else signal.SIGCONT)
         except OSError:     # it ended meanwhile: its reply (EOF) tells the thread
             return
-        self.paused = paused
+        self._stopped = stop
 
     def stop(self) -> None:
         """Stop the child (SIGTERM, then SIGKILL after STOP_WAIT_S) and close the pipe."""
         self.pause(False)     # not needed for SIGTERM (fatal: it wakes a stopped one); tidy
-        process, self.process = self.process, None
-        self.paused = False
+        self.hold(False)
+        with self._signal_lock:
+            process, self.process = self.process, None
+            self.paused = self._frame_hold = self._stopped = False
         if process is not None and process.poll() is None:
             process.terminate()
             try:
