@@ -176,11 +176,16 @@ def measure_window(probe: nl.Probe, node: Any, pub: Any, seconds: float,
 def settle(probe: nl.Probe, node: Any, state: str, quick: bool) -> float:
     """Wait after a set: an 'off' window also waits for the check's process to end."""
     start = time.monotonic()
-    if state == 'off':
-        deadline = start + (2.0 if quick else OFF_WAIT_S)
-        while check_children(node.pid) and time.monotonic() < deadline:
-            probe.spin_for(0.1)
-    probe.spin_for(QUICK_SETTLE_S if quick else SETTLE_S)
+    settle_s = QUICK_SETTLE_S if quick else SETTLE_S
+    if state == 'on':
+        probe.spin_for(settle_s)
+        return time.monotonic() - start
+    # Off: no check process for settle_s in a row (one still starting counts too).
+    deadline, quiet_since = start + (2.0 if quick else OFF_WAIT_S), start
+    while time.monotonic() < deadline and time.monotonic() - quiet_since < settle_s:
+        probe.spin_for(0.1)
+        if check_children(node.pid):
+            quiet_since = time.monotonic()
     return time.monotonic() - start
 
 

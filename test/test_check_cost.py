@@ -54,6 +54,20 @@ def test_the_child_runs_in_the_idle_scheduling_class(worker: CheckWorker) -> Non
     assert os.getpriority(os.PRIO_PROCESS, pid) == 19
 
 
+@pytest.mark.skipif(not LINUX, reason='SCHED_IDLE is Linux')
+def test_the_child_imports_at_idle_priority_already() -> None:
+    """Its priority is set as it starts, not after its second of imports (numpy, OpenCV)."""
+    client = CheckWorker()
+    client.start()
+    try:
+        pid = client.process.pid
+        assert os.sched_getscheduler(pid) == os.SCHED_IDLE
+        assert os.getpriority(os.PRIO_PROCESS, pid) == 19
+    finally:
+        client.stop()
+        client.close()
+
+
 @pytest.mark.skipif(not LINUX, reason='/proc states are Linux')
 @pytest.mark.parametrize('order', ['hold_first', 'pause_first'], ids=['hold-first', 'pause-first'])
 def test_the_child_is_stopped_while_held_or_paused(worker: CheckWorker, order: str) -> None:

@@ -16,6 +16,14 @@ without it (a node the check slows uses less CPU: the gate's probes).
 ``check_deferred``, ``check_pauses`` and ``check_cpu_load`` in ``/diagnostics`` show what the
 gate did.
 
+Issue 36, the frame path does not pay for the check: while a check is in progress, the
+node's frame callback (wrapped by :meth:`CheckThread.holding`) stops the child for the
+frame's time and lets it run after (``check.pause_during_frames``; one state with the gate's
+pause in :class:`~mechdeconv_ros.runtime.check_worker.CheckWorker`); and once
+:data:`STABLE_REPEATS` checks in a row of the model in use gave the same verdict, the next
+waits ``check.stable_period_s`` instead of ``1 / check.rate_hz`` (a new model is checked at
+the rate again). docs/design.md section 2.17, "What runs when".
+
 The thread (nice 19 on Linux) sends the frame to the check's child process
 (:mod:`~mechdeconv_ros.runtime.check_worker`: nice 19, no ROS in it; started with the
 thread when ``check.rate_hz`` > 0, else at the first check) and waits for the reply with the

@@ -10,15 +10,18 @@ needs (p99 latency 33 -> 46 ms at 1280x960). Here it runs in a child process
 :class:`CheckWorker` with :class:`subprocess.Popen`, so it imports nothing of ROS and
 inherits no ROS state, only the socket), which:
 
-* lowers its own CPU priority to nice 19 and, on Linux, the SCHED_IDLE policy (it runs on a
-  core no other thread wants, and a waking thread of the node takes the core at once: on 2
-  cores it lowered the check's cost on the frames in most runs, docs/benchmarks.md), runs
+* runs at nice 19 and, on Linux, the SCHED_IDLE policy (it runs on a core no other thread
+  wants, and a waking thread of the node takes the core at once: on 2 cores it lowered the
+  check's cost on the frames in most runs, docs/benchmarks.md), set by the parent as soon as
+  it exists (its imports are a second of CPU) and again by itself, runs
   OpenCV on one thread, runs in a session of its own and ignores SIGINT (a node is stopped by
   SIGINT to its process group and must exit 0; its parent stops the child);
 * exits when its end of the socket pair closes (the parent stopped, or died, even by
   SIGKILL: the kernel closes the parent's end), after the check it is in, if any; while
   paused (SIGSTOP: the node's CPU gate, :mod:`~mechdeconv_ros.runtime.check_gate`) it cannot
-  read, so it also asks Linux to SIGKILL it when its parent dies (PR_SET_PDEATHSIG).
+  read, so it also asks Linux to SIGKILL it when its parent dies (PR_SET_PDEATHSIG);
+* is also stopped while the node's frame path holds it (:meth:`CheckWorker.hold`, a frame in
+  flight, issue 36): stopped while ``paused or held``.
 
 Protocol, over a :class:`multiprocessing.connection.Connection` on a Unix socket pair, one
 request and one reply at a time:
@@ -69,6 +72,25 @@ THREAD_ENV = {'OMP_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1', 'MKL_NUM_THRE
 #: its child still imports numpy must not leave a KeyboardInterrupt traceback), then main().
 BOOTSTRAP = ('import signal, sys; signal.signal(signal.SIGINT, signal.SIG_IGN); '
              'from mechdeconv_ros.runtime.check_worker import main; sys.exit(main())')
+
+
+def lower_priority(pid: int) -> None:
+    """
+    Give a process nice 19 and (Linux) the SCHED_IDLE policy; nothing where not allowed.
+
+    SCHED_IDLE: a core only when no other thread wants it, and a waking one preempts it at
+    once.
+
+    :param pid: the process (0: this one).
+    """
+    try:
+        os.setpriority(os.PRIO_PROCESS, pid, NICE)
+    except (AttributeError, OSError):
+        pass
+    try:
+        os.sched_setscheduler(pid, os.SCHED_IDLE, os.sched_param(0))
+    except (AttributeError, OSError):
+        pass
 
 
 class WorkerGone(RuntimeError):
@@ -197,6 +219,9 @@ class CheckWorker:
                 start_new_session=True)
         finally:
             child.close()
+        # At once, from here: its imports (about a second of CPU) must not run at the node's
+        # priority either (issue 36); main() sets it again.
+        lower_priority(self.process.pid)
         self._conn = Connection(parent.detach())
         self._held = {}
         self.paused = self._frame_hold = self._stopped = False
@@ -338,14 +363,7 @@ def main(argv: list[str] | None = None) -> int:
     if len(args) > 1 and os.getppid() != int(args[1]):
         return 0        # the parent died before the request above
 
-    try:
-        os.setpriority(os.PRIO_PROCESS, 0, NICE)
-    except (AttributeError, OSError):
-        pass
-    try:    # Linux: a core only when no other thread wants it; a waking one preempts at once
-        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
-    except (AttributeError, OSError):
-        pass
+    lower_priority(0)
     cv2.setNumThreads(1)    # one core at most: the node's remap threads need the others
     return serve(Connection(int(args[0])))
 
