@@ -722,7 +722,7 @@ def check_ab_tables(doc: Mapping[str, Any]) -> list[str]:
     """Return the markdown lines of the check's A/B (issue 36, ``benchmarks/check_ab.py``)."""
     target = doc['target']
     windows = doc['windows_s']
-    lines = ['### The self-check against the frame path (check off / on interleaved, rgb8)', '',
+    lines = ['### The self-check against the frame path (check off and on, interleaved)', '',
              'One correct_node per size with its default parameters (config/case2.yaml); its '
              f"check.rate_hz set to 0 (off) and to {doc['on_rate_hz']:g} Hz (on) through its "
              'parameter service for the windows off, on, off, on at each camera rate (30 Hz, '
