@@ -131,3 +131,19 @@ def test_the_duty_cycle_slows_down_once_stable_and_not_for_a_new_model() -> None
     assert thread._period(0.2, model) == pytest.approx(5.0)
     values['check.stable_period_s'] = 1.0
     assert thread._period(0.2, model) == pytest.approx(5.0)
+
+
+@pytest.mark.skipif(not LINUX, reason='/proc states are Linux')
+def test_a_held_child_stops_and_a_late_hold_does_nothing() -> None:
+    """Stopping a child a frame holds ends it; a frame that ends after the stop signals nobody."""
+    client = CheckWorker()
+    client.start()
+    process = client.process
+    client.hold(True)
+    assert wait_for(lambda: state(process.pid) == 'T')
+    client.stop()
+    client.close()
+    assert process.poll() is not None
+    client.hold(False)
+    client.hold(True)
+    assert client.process is None and not client.paused

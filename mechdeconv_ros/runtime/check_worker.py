@@ -321,10 +321,13 @@ class CheckWorker:
 
     def stop(self) -> None:
         """Stop the child (SIGTERM, then SIGKILL after STOP_WAIT_S) and close the pipe."""
-        self.pause(False)     # not needed for SIGTERM (fatal: it wakes a stopped one); tidy
-        self.hold(False)
-        with self._signal_lock:
+        with self._signal_lock:     # no frame's hold can stop it again after this
             process, self.process = self.process, None
+            if process is not None and self._stopped:
+                try:    # not needed for SIGTERM (fatal: it wakes a stopped one); tidy
+                    process.send_signal(signal.SIGCONT)
+                except OSError:
+                    pass
             self.paused = self._frame_hold = self._stopped = False
         if process is not None and process.poll() is None:
             process.terminate()
