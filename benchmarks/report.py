@@ -707,6 +707,10 @@ def node_tables(doc: Mapping[str, Any]) -> list[str]:
     return lines
 
 
+#: A check A/B run at a 1-minute load average above this is marked as loaded.
+LOADED_AB = 1.5
+
+
 def _ab_window_row(size: str, window: Mapping[str, Any]) -> list[str]:
     """Return one window's row of the check A/B table."""
     return [size, window['camera'], fmt_num(window.get('rate_hz')), window['state'],
@@ -763,6 +767,11 @@ def check_ab_tables(doc: Mapping[str, Any]) -> list[str]:
     lines += ['', f"Machine: {machine_line(doc['machine'])}; 1-minute load average "
               f"{fmt_num(doc['load_before'], 2)} at the start, {fmt_num(doc['load_after'], 2)} "
               'at the end.', '']
+    if max(doc['load_before'], doc['load_after']) > LOADED_AB:
+        lines += [f'**Measured on a loaded machine** (load average above {LOADED_AB:g}: other '
+                  "processes' work is in every window, and the gate holds checks back while "
+                  'the machine is busier than check.max_load): these numbers say nothing of '
+                  'the check; rerun `python -m benchmarks.check_cost --ab` on a quiet one.', '']
     return lines
 
 
