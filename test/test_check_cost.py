@@ -147,3 +147,33 @@ def test_a_held_child_stops_and_a_late_hold_does_nothing() -> None:
     client.hold(False)
     client.hold(True)
     assert client.process is None and not client.paused
+
+
+@pytest.mark.skipif(not LINUX, reason='/proc states are Linux')
+@pytest.mark.parametrize('busy', [True, False], ids=['check-running', 'no-check'])
+def test_the_frame_callback_holds_a_running_check(busy: bool) -> None:
+    """While a check runs, a frame's callback runs with the child stopped, even if it raises."""
+    values = defaults()
+    thread = _thread(values)
+    thread._worker.start()
+    try:
+        pid = thread._worker.process.pid
+        assert wait_for(lambda: state(pid) != 'T')
+        thread._busy = busy
+        seen = []
+
+        def frame(msg: Any, read: Any) -> None:
+            seen.append((msg, read, wait_for(lambda: state(pid) == 'T', 0.5 if busy else 0.2)))
+            raise RuntimeError('a bad frame')
+
+        with pytest.raises(RuntimeError):
+            thread.holding(frame)('msg', 'read')
+        assert seen == [('msg', 'read', busy)]
+        assert wait_for(lambda: state(pid) != 'T')
+        # Not while check.pause_during_frames is false.
+        values['check.pause_during_frames'] = False
+        thread.holding(lambda *args: seen.append(state(pid)))('msg', 'read')
+        assert seen[-1] != 'T'
+    finally:
+        thread._worker.stop()
+        thread._worker.close()
