@@ -323,6 +323,7 @@ class CheckThread:
                 self._worker.stop()
                 self._worker.close()
                 self.restarts += 1
+                self._stable = (None, None, 0)      # a fresh window: checked at the rate again
             logger = self._node.get_logger()
             if self.restarts > MAX_RESTARTS:
                 logger.error(f'check: {err}; the check stays off (restarted {MAX_RESTARTS} '
