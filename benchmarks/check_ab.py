@@ -25,9 +25,10 @@ frames, its probe, the shm profile, a private domain):
 
 Per window: delivered fps, latency p50 / p99 (probe receive time - the publisher's stamp, two
 hops), checks completed in it (the node's ``checks`` in /diagnostics at the window's end minus
-at its start; /diagnostics comes every second, so a check that ends in the window's last
-second may count in the next), the CPU seconds the check's process used in it, what the gate
-did (``check_deferred``, ``check_pauses``) and the cores other processes kept busy. The
+at its start, both read half a second later: /diagnostics comes every second, so a check is
+counted in the window it most likely ended in), the CPU seconds the check's process used in
+it, what the gate did (``check_deferred``, ``check_pauses``) and the cores other processes
+kept busy. The
 verdict per size and camera compares the mean of the two 'on' windows with the mean of the
 two 'off' windows: p50 on <= p50 off x 1.05 + 0.5 ms, delivered on >= 0.99 x delivered off,
 and (30 Hz) at least one check completed in each 'on' window.
@@ -84,6 +85,8 @@ P50_SHARE = 0.05
 P50_MARGIN_MS = 0.5
 DELIVERED_SHARE = 0.01
 RATE_PARAM = 'check.rate_hz'
+#: Half the node's /diagnostics period (s): how late, on average, a count there is.
+DIAGNOSTICS_LAG_S = 0.5
 CHILD_TIMEOUT_S = 600.0
 
 
@@ -168,8 +171,12 @@ def measure_window(probe: nl.Probe, node: Any, pub: Any, seconds: float,
     t1 = time.monotonic()
     stats['check_cpu_s'] = check_cpu.poll() - cpu0
     stats.pop('check', None)
+    # /diagnostics reports a count up to a period after it changed: both ends are read half a
+    # period later (a check is counted in the window it most likely ended in).
+    probe.spin_for(DIAGNOSTICS_LAG_S + 0.1)
     for key in nl.CHECK_KEYS:
-        stats[key] = last_before(probe, key, t1) - last_before(probe, key, t0)
+        stats[key] = (last_before(probe, key, t1 + DIAGNOSTICS_LAG_S)
+                      - last_before(probe, key, t0 + DIAGNOSTICS_LAG_S))
     stats['load_1min'] = (load0 + os.getloadavg()[0]) / 2.0
     stats['seconds'] = t1 - t0
     return stats
