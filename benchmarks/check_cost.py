@@ -25,6 +25,10 @@ shared machine; run with ``nice``; writes ``results/check_cost.json``::
 
     python -m benchmarks.check_cost [--rate 30] [--seconds 30] [--check-rate 0.2]
         [--sizes 1280x960,1920x1080]
+
+With ``--ab`` it runs :mod:`benchmarks.check_ab` instead (issue 36: the node with its defaults
+at 1280x720 and 1920x1080 rgb8, check off / on windows interleaved in one run, the verdict
+against the target; part of ``make bench``): ``python -m benchmarks.check_cost --ab``.
 """
 
 from __future__ import annotations
@@ -274,6 +278,9 @@ def targets(runs: dict[str, dict[str, Any]], remap_ms: float) -> dict[str, Any]:
 
 def main() -> None:
     """Measure the relay and the node without and with the check; print JSON lines."""
+    if '--ab' in sys.argv[1:]:      # the interleaved A/B of issue 36 (benchmarks.check_ab)
+        from benchmarks import check_ab
+        sys.exit(check_ab.main([a for a in sys.argv[1:] if a != '--ab']))
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0].strip())
     parser.add_argument('--rate', type=float, default=30.0)
     parser.add_argument('--seconds', type=float, default=30.0)

@@ -750,6 +750,74 @@ def stereo_tables(doc: Mapping[str, Any]) -> list[str]:
     return lines + ['']
 
 
+#: A check A/B run at a 1-minute load average above this is marked as loaded.
+LOADED_AB = 1.5
+
+
+def _ab_window_row(size: str, window: Mapping[str, Any]) -> list[str]:
+    """Return one window's row of the check A/B table."""
+    return [size, window['camera'], fmt_num(window.get('rate_hz')), window['state'],
+            fmt_num(window['fps']), fmt_num(window.get('p50_ms')), fmt_num(window.get('p99_ms')),
+            fmt_num(window['checks'], 0) if window['state'] == 'on' else '-',
+            fmt_num(window.get('check_cpu_s')),
+            f"{fmt_num(window.get('check_deferred'), 0)} / "
+            f"{fmt_num(window.get('check_pauses'), 0)}",
+            fmt_num(window['others_cores'], 2), fmt_num(window.get('load_1min'), 2)]
+
+
+def check_ab_tables(doc: Mapping[str, Any]) -> list[str]:
+    """Return the markdown lines of the check's A/B (issue 36, ``benchmarks/check_ab.py``)."""
+    target = doc['target']
+    windows = doc['windows_s']
+    lines = ['### The self-check against the frame path (check off and on, interleaved)', '',
+             'One correct_node per size with its default parameters (config/case2.yaml); its '
+             f"check.rate_hz set to 0 (off) and to {doc['on_rate_hz']:g} Hz (on) through its "
+             'parameter service for the windows off, on, off, on at each camera rate (30 Hz, '
+             'then paced at the serial bound 1 / (1 / pass-through flat-out fps + bare remap)'
+             f"); windows of {', '.join(f'{v:g} s ({k})' for k, v in windows.items())}, each "
+             f"{doc['settle_s']:g} s after its set (and, off, after the check's process ended). "
+             'Latency = probe receive - publisher stamp (two hops). Checks = completed in the '
+             "window (the node's /diagnostics); check CPU = the check process's CPU seconds "
+             'in the window; gate = checks deferred / paused by the CPU gate in the window; '
+             'load = 1-minute load average.'
+             + (f" Extra node parameters: `{doc['node_params']}`." if doc.get('node_params')
+                else ''), '']
+    rows = [_ab_window_row(size, w) for size, entry in doc['sizes'].items()
+            for w in entry['windows']]
+    lines += markdown_table(['frame', 'camera', 'Hz', 'check', 'delivered fps', 'p50 ms',
+                             'p99 ms', 'checks completed', 'check CPU s', 'gate deferred / paused',
+                             'others cores', 'load'], rows)
+    lines += ['', f"Target (issue 36): p50 on <= p50 off x {1 + target['p50_share']:g} + "
+              f"{target['p50_margin_ms']:g} ms, delivered on >= {1 - target['delivered_share']:g} "
+              'x off (means of the two windows of each), and at 30 Hz a check completed in '
+              "every 'on' window.", '']
+    rows = []
+    for v in doc['verdicts'].values():
+        checks = ', '.join(str(c) for c in v['checks_per_on_window'])
+        rows.append([v['size'], v['camera'],
+                     f"{fmt_num(v['p50_off_ms'])} / {fmt_num(v['p50_on_ms'])} "
+                     f"(<= {fmt_num(v['p50_limit_ms'])}): {verdict(v['p50_met'])}",
+                     f"{fmt_num(v['fps_off'])} / {fmt_num(v['fps_on'])} "
+                     f"(>= {fmt_num(v['fps_limit'])}): {verdict(v['fps_met'])}",
+                     checks + ('' if v['checks_met'] is None
+                               else f": {verdict(v['checks_met'])}"),
+                     verdict(v['met'])])
+    lines += markdown_table(['frame', 'camera', 'p50 ms off / on (limit)',
+                             'delivered fps off / on (limit)', "checks per 'on' window",
+                             'verdict'], rows)
+    if doc['errors']:
+        lines += ['', 'Errors: ' + '; '.join(e.splitlines()[0] for e in doc['errors'])]
+    lines += ['', f"Machine: {machine_line(doc['machine'])}; 1-minute load average "
+              f"{fmt_num(doc['load_before'], 2)} at the start, {fmt_num(doc['load_after'], 2)} "
+              'at the end.', '']
+    if max(doc['load_before'], doc['load_after']) > LOADED_AB:
+        lines += [f'**Measured on a loaded machine** (load average above {LOADED_AB:g}: other '
+                  "processes' work is in every window, and the gate holds checks back while "
+                  'the machine is busier than check.max_load): these numbers say nothing of '
+                  'the check; rerun `python -m benchmarks.check_cost --ab` on a quiet one.', '']
+    return lines
+
+
 # ---------------------------------------------------------------------------------------------
 # Soak
 # ---------------------------------------------------------------------------------------------

@@ -15,13 +15,14 @@ below 0.5, so the timings are taken on a quiet machine; then runs :mod:`benchmar
 :mod:`benchmarks.compressed_input`, :mod:`benchmarks.zoom` (a moving zoom lens),
 :mod:`benchmarks.lens_import` (imported lens files against optiland) and
 :mod:`benchmarks.real_lenses` (production lenses' patents against lensfun; it also writes
-docs/real_lenses.md and config/lenses) and :mod:`benchmarks.stereo_latency` (stereo_node
-against a relay of two streams), each writing its
+docs/real_lenses.md and config/lenses), :mod:`benchmarks.stereo_latency` (stereo_node
+against a relay of two streams) and :mod:`benchmarks.check_ab` (the self-check's cost:
+check off / on windows interleaved, issue 36), each writing its
 ``results/<name>.json`` and figures, and finally prints the markdown tables (made by
 :mod:`benchmarks.report`) and writes them to ``results/README_tables.md`` and to
 ``docs/benchmarks.md`` (a generated file: the machine line at the top, figure links relative
 to it). ``--quick`` (tiny sizes, one repetition: proves the pipeline runs, its numbers mean
-nothing) writes no ``docs/benchmarks.md`` unless ``--docs`` names one. About ten minutes on
+nothing) writes no ``docs/benchmarks.md`` unless ``--docs`` names one. About fifteen minutes on
 2 cores.
 """
 
@@ -34,8 +35,8 @@ import time
 from typing import Any, Callable
 
 from benchmarks import (
-    accuracy, colour, compressed_input, lens_import, node_latency, real_lenses, regenerate, speed,
-    stages, stereo_latency, vignetting, wide, zoom)
+    accuracy, check_ab, colour, compressed_input, lens_import, node_latency, real_lenses,
+    regenerate, speed, stages, stereo_latency, vignetting, wide, zoom)
 from benchmarks.common import log, RESULTS, wait_for_low_load
 from benchmarks.regenerate import DOCS_PAGE, docs_page, tables_header
 from benchmarks.report import machine_info, machine_line, write_json
@@ -47,7 +48,8 @@ BENCHMARKS: dict[str, tuple[Callable[..., Any], Callable[[Any], list[str]]]] = {
         ('stages', stages.run), ('wide', wide.run), ('vignetting', vignetting.run),
         ('colour', colour.run), ('compressed', compressed_input.run), ('zoom', zoom.run),
         ('lens_import', lens_import.run), ('real_lenses', real_lenses.run),
-        ('stereo', stereo_latency.run))}
+        ('stereo', stereo_latency.run),
+        ('check_ab', check_ab.run))}
 
 
 def run_all(out_dir: Path = RESULTS, quick: bool = False,

@@ -343,3 +343,22 @@ def test_real_lens_readme_row_pairs_each_lens_with_its_own_baseline():
     assert (f"{fisheye['ours']['frame']['max_pct']:.2f} vs "
             f"{fisheye['textbook']['frame']['max_pct']:.2f} %") in row
     assert all('verdicts' in r for r in doc['lenses'])
+
+
+@pytest.mark.ros
+def test_check_ab_quick(tmp_path):
+    """The check's A/B runs one node, windows off/on/off/on, and writes what the report needs."""
+    from benchmarks import check_ab
+    doc = check_ab.run(tmp_path, quick=True)
+    assert doc['errors'] == [], doc['errors']
+    saved = json.loads((tmp_path / 'check_ab.json').read_text())
+    (size, entry), = saved['sizes'].items()
+    assert [w['state'] for w in entry['windows']] == list(check_ab.WINDOWS)
+    for window in entry['windows']:
+        assert window['fps'] > 5.0, window
+        for key in ('p50_ms', 'checks', 'check_cpu_s', 'check_deferred', 'others_cores'):
+            assert key in window, key
+    verdict, = saved['verdicts'].values()
+    assert verdict['size'] == size and len(verdict['checks_per_on_window']) == 2
+    text = '\n'.join(report.check_ab_tables(saved))
+    assert "checks per 'on' window" in text and size in text

@@ -77,6 +77,9 @@ def node_here() -> Iterator[tuple[Any, int, threading.Thread]]:
     node = Recording(context=context, cli_args=[
         '--ros-args', '--params-file', str(PARAMS), '-p', 'check.rate_hz:=10.0',
         '-p', 'check.window:=3', '-p', 'check.max_load:=1.0', '-p', 'check.apply:=true',
+        # The parameter path is under test, not when checks run (test_check_cost.py): every
+        # frame is fed back to back here, so a child held per frame would barely run.
+        '-p', 'check.stable_period_s:=0.0', '-p', 'check.pause_during_frames:=false',
         '-p', 'lazy_subscription:=false'])
     node.set_threads.clear()     # the input's QoS overrides, declared by the constructor
     executor = SingleThreadedExecutor(context=context)

@@ -112,9 +112,11 @@ def test_no_orphan_when_the_parent_is_killed(paused: bool) -> None:
     code = ('import sys, time\n'
             'from mechdeconv_ros.runtime.check_worker import CheckWorker\n'
             'w = CheckWorker()\nw.start()\nif len(sys.argv) > 1:\n'
-            # Paused once it serves (its nice 19 is set after the death signal), as in a check.
-            '    import psutil\n    child = psutil.Process(w.process.pid)\n'
-            '    while child.nice() != 19:\n        time.sleep(0.05)\n    w.pause(True)\n'
+            # Paused once it serves (blocked reading its socket: after the death signal), as
+            # in a check (the parent sets its nice 19 at once: no sign of that any more).
+            '    wchan = f"/proc/{w.process.pid}/wchan"\n'
+            '    while "unix_stream" not in open(wchan).read():\n        time.sleep(0.05)\n'
+            '    w.pause(True)\n'
             'print(w.process.pid, flush=True)\ntime.sleep(60)\n')
     parent = subprocess.Popen([sys.executable, '-c', code, *(['paused'] if paused else [])],
                               stdout=subprocess.PIPE, cwd=REPO)

@@ -73,6 +73,15 @@ class CheckThread:
         """
         self.session.offer(corrected, model)
 
+    def holding(self, callback: Any) -> Any:
+        """
+        Return the frame callback with the check's process stopped while it runs (issue 36).
+
+        :param callback: the node's frame callback.
+        :return: :meth:`CheckSession.holding` of it.
+        """
+        return self.session.holding(callback)
+
     def entries(self) -> dict[str, Any]:
         """Return the check's /diagnostics entries now."""
         return self.session.entries()

@@ -116,13 +116,14 @@ class CorrectNode(Node):
         self._compressed_settings = compressed_settings(self._live.value)
         self._debayer = str(self._live.value('debayer'))    # read on set, not per frame
         self._stats.image_transport = str(self._live.value('image_transport'))
-        self._input = LazyInput(self, self._stats.image_transport, self._on_frame,
+        self._check = CheckThread(self, self._live, self._stats.extra, log_function(self))
+        self._input = LazyInput(self, self._stats.image_transport,
+                                self._check.holding(self._on_frame),    # issue 36
                                 MutuallyExclusiveCallbackGroup(), self._frame_error)
         self._stats.input_topic = self._input.topic
         self._pub_diag, self._outputs, events = create_outputs(self, self._update_subscription)
         self._pub_image, self._pub_info, self._pub_info_rect, self._pub_compressed = \
             self._outputs
-        self._check = CheckThread(self, self._live, self._stats.extra, log_function(self))
         self._check.start()     # its apply is set on this executor (check_thread.py)
         self._rebuild_trigger = self.create_guard_condition(self._live.start_requested_rebuild)
         self._live.start()
@@ -279,9 +280,8 @@ class CorrectNode(Node):
 
     def destroy_node(self) -> None:
         """Stop the check and rebuild threads, then destroy the node."""
-        for worker in (getattr(self, '_check', None), self._live):   # None: start-up failed
-            if worker is not None:
-                worker.stop()
+        for worker in filter(None, (getattr(self, '_check', None), self._live)):  # None: failed
+            worker.stop()
         if self._stage_clock is not None:
             self._stage_clock.dump()
         super().destroy_node()

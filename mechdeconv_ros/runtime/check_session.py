@@ -73,6 +73,9 @@ import numpy as np
 WAIT_S = 0.5
 #: Seconds between two looks at the machine's load while a check runs (pause / continue).
 LOAD_POLL_S = 0.05
+#: Checks in a row of one model with one verdict after which the next waits
+#: ``check.stable_period_s`` (issue 36's duty cycle).
+STABLE_REPEATS = 2
 #: Restarts of a check process that died or got stuck before the check gives up.
 MAX_RESTARTS = 3
 #: Seconds the thread waits, after its check process ended, for the node's stop (a stop in
@@ -171,6 +174,9 @@ class CheckSession:
         self._reference = {name: float(value(name)) for name, _ in ESTIMATED}
         self._logged: dict[str, float] = {}
         self.checks = 0
+        # The duty cycle (issue 36): the model last judged, its verdict, how many checks in a
+        # row gave it (STABLE_REPEATS of them: the next waits check.stable_period_s).
+        self._stable: tuple[Any, str | None, int] = (None, None, 0)
         self.applied_sets = 0
         #: Seconds of the child running without a reply, and of a request's send, after
         #: which it is stuck.
@@ -227,7 +233,7 @@ class CheckSession:
             return
         rate = float(self._value('check.rate_hz'))
         now = time.monotonic()
-        if rate <= 0.0 or self._busy or now - self._last_offer < 1.0 / rate:
+        if rate <= 0.0 or self._busy or now - self._last_offer < self._period(rate, model):
             return
         self._last_offer = now
         if not self._gate.may_start(float(self._value('check.max_load'))):
@@ -237,6 +243,55 @@ class CheckSession:
             self._pending = (np.copy(corrected), model)
             self._busy = True
         self._wake.set()
+
+    def _period(self, rate: float, model: Any) -> float:
+        """
+        Return the seconds from the end of the last check to the next (the duty cycle).
+
+        ``1 / check.rate_hz``; once :data:`STABLE_REPEATS` checks in a row of the model that
+        corrects the frames gave the same verdict, ``check.stable_period_s`` (if longer; 0:
+        never): a new model (a parameter set, another frame size) is checked at the rate again.
+        """
+        judged, _, repeats = self._stable
+        stable_s = float(self._value('check.stable_period_s'))
+        if model is judged and repeats >= STABLE_REPEATS and stable_s > 0.0:
+            return max(1.0 / rate, stable_s)
+        return 1.0 / rate
+
+    def _record(self, current: Any, verdict: str) -> None:
+        """Count the checks in a row of one model with one verdict (:meth:`_period`)."""
+        judged, last, repeats = self._stable
+        same = judged is current and last == verdict
+        self._stable = (current, verdict, repeats + 1 if same else 1)
+
+    def holding(self, callback: Callable[..., None]) -> Callable[..., None]:
+        """
+        Return the frame callback wrapped in :meth:`frame_started` / :meth:`frame_ended`.
+
+        :param callback: the node's frame callback.
+        :return: the same callback, the check's process stopped while it runs.
+        """
+        def held(*args: Any) -> None:
+            self.frame_started()
+            try:
+                callback(*args)
+            finally:
+                self.frame_ended()
+        return held
+
+    def frame_started(self) -> None:
+        """
+        Stop the check's process: a frame enters the frame path (issue 36).
+
+        Only while a check is in progress and ``check.pause_during_frames`` is true; a
+        signal (about 5 us) at most. :meth:`frame_ended` must follow (try / finally).
+        """
+        if self._busy and bool(self._value('check.pause_during_frames')):
+            self._worker.hold(True)
+
+    def frame_ended(self) -> None:
+        """Let the check's process run again: the frame is out (published or dropped)."""
+        self._worker.hold(False)
 
     def entries(self) -> dict[str, Any]:
         """
@@ -397,6 +452,7 @@ class CheckSession:
                 return False
         self._worker.stop()     # continues a paused one first
         self._worker.close()
+        self._stable = (None, None, 0)      # a fresh window: checked at the rate again
         self._log('info', f'check: {reason or "off (check.rate_hz 0)"}: its process stopped')
         return False
 
@@ -433,6 +489,7 @@ class CheckSession:
             self._worker.stop()
             self._worker.close()
             self.restarts += 1
+            self._stable = (None, None, 0)      # a fresh window: checked at the rate again
             if self.restarts > MAX_RESTARTS:
                 self._set_state(f'gave up: {err} (restarted {MAX_RESTARTS} times; set '
                                 'check.rate_hz to 0 and back to try again)')
@@ -459,6 +516,7 @@ class CheckSession:
         if result is None:      # the frame's size is not the current model's: a new window
             return
         self.checks += 1
+        self._record(current, result.verdict)
         entries = diagnostics_entries(result)
         entries['check_frames'] = reply['frames']
         entries['check_ms_last'] = (time.perf_counter() - start) * 1e3

@@ -14,7 +14,8 @@ inherits no ROS state, only the socket), which:
   current directory off ``sys.path`` (``python -c`` puts it first) and ``PYTHONPATH`` starts
   with the directory that holds the parent's ``mechdeconv_ros`` (issue 36 (i));
 
-* lowers its own CPU priority to nice 19 and, on Linux, the SCHED_IDLE policy (it runs on a
+* runs at nice 19 and, on Linux, the SCHED_IDLE policy, set by the parent as soon as it
+  exists (its imports are a second of CPU) and again by itself (it runs on a
   core no other thread wants, and a waking thread of the node takes the core at once: on 2
   cores it lowered the check's cost on the frames in most runs, docs/benchmarks.md), runs
   OpenCV on one thread, runs in a session of its own and ignores SIGINT (a node is stopped by
@@ -22,7 +23,9 @@ inherits no ROS state, only the socket), which:
 * exits when its end of the socket pair closes (the parent stopped, or died, even by
   SIGKILL: the kernel closes the parent's end), after the check it is in, if any; while
   paused (SIGSTOP: the node's CPU gate, :mod:`~mechdeconv_ros.runtime.check_gate`) it cannot
-  read, so it also asks Linux to SIGKILL it when its parent dies (PR_SET_PDEATHSIG).
+  read, so it also asks Linux to SIGKILL it when its parent dies (PR_SET_PDEATHSIG);
+* is also stopped while the node's frame path holds it (:meth:`CheckWorker.hold`, a frame in
+  flight, issue 36): stopped while ``paused or held``.
 
 Protocol, over a :class:`multiprocessing.connection.Connection` on a Unix socket pair, one
 request and one reply at a time:
@@ -66,6 +69,7 @@ import socket
 import struct
 import subprocess
 import sys
+import threading
 import time
 from typing import Any, Callable
 
@@ -96,6 +100,25 @@ THREAD_ENV = {'OMP_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1', 'MKL_NUM_THRE
 #: its child still imports numpy must not leave a KeyboardInterrupt traceback), then main().
 BOOTSTRAP = ('import signal, sys; signal.signal(signal.SIGINT, signal.SIG_IGN); '
              'from mechdeconv_ros.runtime.check_worker import main; sys.exit(main())')
+
+
+def lower_priority(pid: int) -> None:
+    """
+    Give a process nice 19 and (Linux) the SCHED_IDLE policy; nothing where not allowed.
+
+    SCHED_IDLE: a core only when no other thread wants it, and a waking one preempts it at
+    once.
+
+    :param pid: the process (0: this one).
+    """
+    try:
+        os.setpriority(os.PRIO_PROCESS, pid, NICE)
+    except (AttributeError, OSError):
+        pass
+    try:
+        os.sched_setscheduler(pid, os.SCHED_IDLE, os.sched_param(0))
+    except (AttributeError, OSError):
+        pass
 
 
 class WorkerGone(RuntimeError):
@@ -204,6 +227,11 @@ class CheckWorker:
         self.process: subprocess.Popen | None = None
         #: Whether the child is stopped by :meth:`pause` (SIGSTOP) and not yet resumed.
         self.paused = False
+        # Issue 36: the child is stopped while the gate pauses it OR a frame is in flight
+        # (:meth:`hold`, from the frame path); one lock orders the callers' signals.
+        self._frame_hold = False
+        self._stopped = False
+        self._signal_lock = threading.Lock()
         self._conn: Any = None
         self._sock: socket.socket | None = None    # the same socket, for non-blocking sends
         self._held: dict[int, Any] = {}    # token -> model, as the child holds them
@@ -231,10 +259,13 @@ class CheckWorker:
                 start_new_session=True)
         finally:
             child.close()
+        # At once, from here: its imports (about a second of CPU) must not run at the node's
+        # priority either (issue 36); main() sets it again.
+        lower_priority(self.process.pid)
         self._sock = parent
         self._conn = Connection(os.dup(parent.fileno()))
         self._held = {}
-        self.paused = False
+        self.paused = self._frame_hold = self._stopped = False
 
     def _token(self, model: Any, taken: int = 0) -> int:
         """Return the token of a model the child holds, else a new one (above ``taken``)."""
@@ -327,7 +358,7 @@ class CheckWorker:
         running_s, last = 0.0, time.monotonic()
         while not self._conn.poll(poll_s):
             now = time.monotonic()
-            if not self.paused:         # time paused by the gate is not the child's fault
+            if not self._stopped:       # time stopped (gate, frames) is not the child's fault
                 running_s += now - last
             last = now
             if running_s > timeout_s:
@@ -337,32 +368,63 @@ class CheckWorker:
                 waiting()
 
     def resume(self) -> None:
-        """Continue the child (SIGCONT), whatever :attr:`paused` says; nothing if it is gone."""
-        process = self.process
-        if process is not None:
-            try:
-                process.send_signal(signal.SIGCONT)
-            except OSError:
-                pass
-        self.paused = False
+        """
+        Continue the child (SIGCONT), whatever :attr:`paused` says; nothing if it is gone.
+
+        A frame's hold (:meth:`hold`) is not lifted: its end sends nothing (the child runs).
+        """
+        with self._signal_lock:
+            process = self.process
+            if process is not None:
+                try:
+                    process.send_signal(signal.SIGCONT)
+                except OSError:
+                    pass
+            self.paused = self._stopped = False
 
     def pause(self, paused: bool) -> None:
         """
         Stop (SIGSTOP) or continue (SIGCONT) the child; nothing if it is already so or gone.
 
         A stopped child holds its memory and its place in a check; it uses no CPU, no memory
-        bandwidth, no cache (what its priority alone could not give the frame path).
+        bandwidth, no cache (what its priority alone could not give the frame path). It stays
+        stopped while :meth:`hold` holds it.
 
         :param paused: True to stop it, False to continue it.
         """
+        with self._signal_lock:
+            if self.process is None or paused == self.paused:
+                return
+            self.paused = paused
+            self._signal()
+
+    def hold(self, held: bool) -> None:
+        """
+        Stop the child while a frame is in flight (True), let it run again after (False).
+
+        Called by the node's frame path (issue 36): a signal per change, about 5 us; the
+        child's state is ``paused or held``. The frame path always releases what it held, so
+        a held child never waits longer than one frame.
+
+        :param held: True at a frame's start, False at its end.
+        """
+        with self._signal_lock:
+            if self.process is None or held == self._frame_hold:
+                return
+            self._frame_hold = held
+            self._signal()
+
+    def _signal(self) -> None:
+        """Send SIGSTOP / SIGCONT when ``paused or held`` differs from the child's state."""
+        stop = self.paused or self._frame_hold
         process = self.process
-        if process is None or paused == self.paused:
+        if process is None or stop == self._stopped:
             return
         try:
-            process.send_signal(signal.SIGSTOP if paused else signal.SIGCONT)
+            process.send_signal(signal.SIGSTOP if stop else signal.SIGCONT)
         except OSError:     # it ended meanwhile: its reply (EOF) tells the thread
             return
-        self.paused = paused
+        self._stopped = stop
 
     def stop(self) -> None:
         """
@@ -370,9 +432,14 @@ class CheckWorker:
 
         The pipe stays open until :meth:`close` (the caller's thread may still read it).
         """
-        self.resume()       # not needed for SIGTERM (fatal: it wakes a stopped one); tidy
-        process, self.process = self.process, None
-        self.paused = False
+        with self._signal_lock:     # no frame's hold can stop it again after this
+            process, self.process = self.process, None
+            if process is not None:
+                try:    # not needed for SIGTERM (fatal: it wakes a stopped one); tidy
+                    process.send_signal(signal.SIGCONT)
+                except OSError:
+                    pass
+            self.paused = self._frame_hold = self._stopped = False
         if process is not None and process.poll() is None:
             try:    # SCHED_IDLE on a busy machine may not run its exit for seconds
                 os.sched_setscheduler(process.pid, os.SCHED_OTHER, os.sched_param(0))
@@ -420,14 +487,7 @@ def main(argv: list[str] | None = None) -> int:
     if len(args) > 1 and os.getppid() != int(args[1]):
         return 0        # the parent died before the request above
 
-    try:
-        os.setpriority(os.PRIO_PROCESS, 0, NICE)
-    except (AttributeError, OSError):
-        pass
-    try:    # Linux: a core only when no other thread wants it; a waking one preempts at once
-        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
-    except (AttributeError, OSError):
-        pass
+    lower_priority(0)
     cv2.setNumThreads(1)    # one core at most: the node's remap threads need the others
     return serve(Connection(int(args[0])))
 

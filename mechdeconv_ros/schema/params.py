@@ -381,6 +381,15 @@ SCHEMA: tuple[ParamSpec, ...] = (
        'the check process included, counts as idle) for a check to start; above it a check '
        'waits, and one in progress is paused (SIGSTOP) until the load is below 0.8 of it: '
        'the frames come first. 1 = never held back.', 0.05, 1.0),
+    _d('check.stable_period_s', 60.0, 's',
+       'Seconds between checks once two checks in a row of the model in use gave the same '
+       'verdict (if longer than 1 / check.rate_hz); a new model (a parameter set, a new '
+       'frame size) is checked at check.rate_hz again. 0 = always at check.rate_hz.', 0.0,
+       86400.0),
+    ParamSpec('check.pause_during_frames', 'bool', True, '',
+              'Stop the check process (SIGSTOP) while a frame is being corrected and '
+              'published, and let it run (SIGCONT) between frames: the frame path never '
+              'shares the CPUs, caches and memory bus with a check (issue 36).'),
     _i('check.window', 5, '1',
        'Frames whose straight edges the check and its estimate pool (the last N checked).',
        1, 100),
