@@ -48,8 +48,9 @@ import math
 from typing import Any, Mapping
 
 from mechdeconv_ros.imaging.plumb_lines import (
-    ChiefLines, edge_index, field_coverage, great_circles, MIN_EDGE_POINTS, output_focal_px,
-    straight_edges, straightness_px)
+    ChiefLines, edge_index, field_coverage, great_circles, line_pieces, MIN_EDGE_POINTS,
+    output_focal_px, straightness_px, thin)
+from mechdeconv_ros.imaging.scene_lines import group_lines
 from mechdeconv_ros.imaging.straight_edges import detect_chains, Points, sample_map
 from mechdeconv_ros.optics.prescription import vertex_z
 import numpy as np
@@ -95,6 +96,7 @@ class CheckResult:
     straightness_rms_px: float | None = None
     straightness_max_px: float | None = None
     edges: int = 0
+    lines: int = 0
     field_coverage: float = 0.0
     estimate: dict[str, dict[str, float]] = field(default_factory=dict)
     straightness_rms_px_after: float | None = None
@@ -107,7 +109,7 @@ class CheckResult:
         """Return the result as JSON-ready values."""
         return {'straightness_rms_px': self.straightness_rms_px,
                 'straightness_max_px': self.straightness_max_px,
-                'edges': self.edges, 'field_coverage': self.field_coverage,
+                'edges': self.edges, 'lines': self.lines, 'field_coverage': self.field_coverage,
                 'estimate': self.estimate,
                 'straightness_rms_px_after': self.straightness_rms_px_after,
                 'straightness_max_px_after': self.straightness_max_px_after,
@@ -175,12 +177,13 @@ class _Problem:
     """The straight edges' residuals (raw px) as a function of the free pose components."""
 
     def __init__(self, lines: ChiefLines, edges: list[Points], pose0: npt.NDArray[np.float64],
-                 free: npt.NDArray[np.int64]):
+                 free: npt.NDArray[np.int64], ids: npt.NDArray[np.int64] | None = None):
         self.lines, self.pose0, self.free = lines, pose0, free
-        self.set_edges(edges)
+        self.set_edges(edges, np.arange(len(edges)) if ids is None else ids)
 
-    def set_edges(self, edges: list[Points]) -> None:
+    def set_edges(self, edges: list[Points], ids: npt.NDArray[np.int64]) -> None:
         self.edges = edges
+        self.ids = ids      # each edge's number among the description's straight edges
         self.points = np.concatenate(edges) if edges else np.zeros((0, 2))
         self.index = edge_index(edges)
         self.count = len(edges)
@@ -239,10 +242,10 @@ class _Problem:
         edges = [p[k] for p, k in zip(np.split(self.points, np.cumsum(
             np.bincount(self.index, minlength=self.count))[:-1]),
             np.split(keep, np.cumsum(np.bincount(self.index, minlength=self.count))[:-1]))]
-        edges = [e for e in edges if e.shape[0] >= MIN_EDGE_POINTS]
-        if len(edges) < MIN_EDGES:
+        kept = [k for k, e in enumerate(edges) if e.shape[0] >= MIN_EDGE_POINTS]
+        if len(kept) < MIN_EDGES:
             return False
-        self.set_edges(edges)
+        self.set_edges([edges[k] for k in kept], self.ids[kept])
         return True
 
     def jacobian(self, x: npt.NDArray[np.float64], r: npt.NDArray[np.float64],
@@ -321,7 +324,8 @@ def check_chains(model: Any, chains: list[Points], max_rms_px: float,
     """
     lines = ChiefLines.from_model(model)
     pose0 = nominal_pose(model)
-    edges = straight_edges(chains, lines, pose0, output_focal_px(model))
+    pieces, short = line_pieces(chains, lines, pose0, output_focal_px(model))
+    edges = [thin(piece) for piece in pieces]
     result = CheckResult()
     tol = tolerances(model)
     free = np.flatnonzero(tol > 0.0) if estimate else np.zeros(0, dtype=np.int64)
@@ -349,7 +353,12 @@ def check_chains(model: Any, chains: list[Points], max_rms_px: float,
     result.field_coverage = field_coverage(lines, pose0, problem.points)
     if problem.count == 0:
         return result
-    rms, worst, _ = _straightness(model, lines, problem, pose0)
+    # Whole scene lines, grouped once under the description (the membership does not
+    # change with the pose): the straightness is each point's distance from its whole line,
+    # over every point of the edges the fit kept and of the short pieces on their lines.
+    whole = _WholeLines(model, lines, [pieces[k] for k in problem.ids], short, pose0)
+    result.lines = whole.count
+    rms, worst = whole.straightness(pose0)
     result.straightness_rms_px, result.straightness_max_px = rms, worst
     if problem.count < MIN_EDGES or result.field_coverage < MIN_COVERAGE:
         return result
@@ -376,7 +385,7 @@ def check_chains(model: Any, chains: list[Points], max_rms_px: float,
         value = float(pose[k]) if k < 4 else base_d + float(pose[4])
         result.estimate[name] = {'value': value, 'sigma': float(sigma[j]),
                                  'tolerance': float(tol[k])}
-    after = _straightness(model, lines, problem, pose)
+    after = whole.straightness(pose)
     result.straightness_rms_px_after, result.straightness_max_px_after = after[0], after[1]
     moved = [abs(est['value'] - base) > max(OFF_SIGMAS * est['sigma'], est['tolerance'])
              for est, base in zip(result.estimate.values(), _bases(model, free, base_d))]
@@ -391,12 +400,26 @@ def _bases(model: Any, free: npt.NDArray[np.int64], base_d: float) -> list[float
     return [float(pose0[k]) if k < 4 else base_d for k in free]
 
 
-def _straightness(model: Any, lines: ChiefLines, problem: _Problem,
-                  pose: npt.NDArray[np.float64]) -> tuple[float, float, Points]:
-    """Return the straightness of the problem's edges under a pose."""
-    dirs = lines.directions(problem.points, pose)
-    good = np.all(np.isfinite(dirs), axis=1)
-    return straightness_px(model, dirs[good], problem.index[good], problem.count)
+class _WholeLines:
+    """The points of whole scene lines: straight edges and the short pieces on their lines."""
+
+    def __init__(self, model: Any, lines: ChiefLines, edges: list[Points], short: list[Points],
+                 pose0: npt.NDArray[np.float64]):
+        self.model, self.lines = model, lines
+        on_edges, on_short = group_lines(edges, lines, pose0, output_focal_px(model), short)
+        joined = [k for k in range(len(short)) if on_short[k] >= 0]
+        parts = list(edges) + [short[k] for k in joined]
+        self.points = np.concatenate(parts) if parts else np.zeros((0, 2))
+        labels = np.concatenate([on_edges, on_short[joined]]).astype(np.int64)
+        self.line = np.repeat(labels, [p.shape[0] for p in parts])
+        self.count = int(on_edges.max()) + 1 if on_edges.size else 0
+
+    def straightness(self, pose: npt.NDArray[np.float64]) -> tuple[float, float]:
+        """Return the RMS and largest distance from the whole lines under a pose, px."""
+        dirs = self.lines.directions(self.points, pose)
+        good = np.all(np.isfinite(dirs), axis=1)
+        rms, worst, _ = straightness_px(self.model, dirs[good], self.line[good], self.count)
+        return rms, worst
 
 
 def check_images(model: Any, images: list[np.ndarray], max_rms_px: float,

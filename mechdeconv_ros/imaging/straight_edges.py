@@ -15,16 +15,23 @@ Pure OpenCV and numpy, no ROS. Works on any single frame (raw or corrected); the
    ``d = (g- - g+) / (2 (g- - 2 g0 + g+))``, ``|d| <= 0.5``; the point is ``p + d n``
    (Devernay 1995, along the gradient rather than the nearer axis).
 3. Chains: a ridge pixel whose 8-neighbourhood holds three or more separate runs of ridge
-   pixels (the crossing number) is a junction (a T, an X) and is dropped with its
+   pixels (the crossing number) is a junction (a T, an X), one whose unit gradient turns by
+   more than ``CORNER_DEG`` to a ridge neighbour's is a corner (an L: the outline of a
+   rectangle would otherwise be one closed chain), and both are dropped with their
    neighbours; the rest are split into 8-connected components, each a simple curve. The
    points of a chain are ordered along its principal axis (the chains are arcs of less than
-   a half turn after the split of :mod:`~mechdeconv_ros.imaging.plumb_lines`).
+   a half turn after the split of :mod:`~mechdeconv_ros.imaging.plumb_lines`), in the
+   direction that has the gradient (dark to light) on its left, ``t_x g_y - t_y g_x > 0``
+   (x right, y down): the order carries the edge's polarity, which
+   :mod:`~mechdeconv_ros.imaging.scene_lines` uses to keep the two sides of a bar apart.
 
 Sign conventions: pixel (x, y) = (column, row) with the centre of the top-left pixel at
 (0, 0), as OpenCV's remap maps.
 """
 
 from __future__ import annotations
+
+import math
 
 import cv2
 import numpy as np
@@ -38,6 +45,10 @@ CANNY_HIGH = 64.0
 #: Grey level (8-bit range) below which a pixel is black: outside the image circle or the
 #: corrected field. Ridges near black are its border, not the scene's.
 DARK_LEVEL = 6.0
+#: A ridge pixel whose unit gradient differs from a ridge neighbour's by more than this, deg,
+#: is a corner (of a rectangle's outline: an L, which the crossing number does not see) and
+#: is cut like a junction. Along a smooth edge neighbours differ by a degree or two.
+CORNER_DEG = 30.0
 #: Points dropped at each end of a chain (rounded corners where it met a junction).
 TRIM_POINTS = 4
 #: A chain shorter than this many ridge pixels is dropped (too short to tell a curve).
@@ -74,6 +85,23 @@ def _crossing_number(ridge: npt.NDArray[np.uint8]) -> npt.NDArray[np.int32]:
     return count
 
 
+def _corners(ridge: npt.NDArray[np.uint8], gx: np.ndarray, gy: np.ndarray
+             ) -> npt.NDArray[np.bool_]:
+    """Return the ridge pixels whose gradient turns by over ``CORNER_DEG`` to a neighbour."""
+    mag = np.maximum(np.hypot(gx, gy), 1e-9)
+    on = ridge > 0
+    ux = np.where(on, gx / mag, 0.0)
+    uy = np.where(on, gy / mag, 0.0)
+    h, w = ridge.shape
+    px, py, pon = np.pad(ux, 1), np.pad(uy, 1), np.pad(on, 1)
+    limit = math.cos(math.radians(CORNER_DEG))
+    out = np.zeros((h, w), dtype=bool)
+    for r, c in ((0, 0), (0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1), (2, 2)):
+        dot = ux * px[r:r + h, c:c + w] + uy * py[r:r + h, c:c + w]
+        out |= on & pon[r:r + h, c:c + w] & (dot < limit)
+    return out
+
+
 def detect_chains(image: np.ndarray, valid: npt.NDArray[np.bool_] | None = None
                   ) -> list[Points]:
     """
@@ -99,7 +127,7 @@ def detect_chains(image: np.ndarray, valid: npt.NDArray[np.bool_] | None = None
     ridge[:, :2] = 0
     ridge[:, -2:] = 0
     ridge &= cv2.erode(valid.astype(np.uint8), np.ones((9, 9), np.uint8))
-    junction = (_crossing_number(ridge) >= 3) & (ridge > 0)
+    junction = ((_crossing_number(ridge) >= 3) | _corners(ridge, gx, gy)) & (ridge > 0)
     if junction.any():
         ridge[cv2.dilate(junction.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0] = 0
     count, labels = cv2.connectedComponents(ridge, connectivity=8)
@@ -122,14 +150,20 @@ def detect_chains(image: np.ndarray, valid: npt.NDArray[np.bool_] | None = None
     x = cols + offset * nx
     y = rows + offset * ny
     order = np.argsort(lab, kind='stable')
-    lab, x, y = lab[order], x[order], y[order]
+    lab, x, y, nx, ny = lab[order], x[order], y[order], nx[order], ny[order]
     bounds = np.flatnonzero(np.diff(lab)) + 1
     chains = []
-    for xs, ys in zip(np.split(x, bounds), np.split(y, bounds)):
+    for xs, ys, gxs, gys in zip(*(np.split(a, bounds) for a in (x, y, nx, ny))):
         if xs.size < MIN_CHAIN_POINTS + 2 * TRIM_POINTS:
             continue
-        pts = np.stack([xs, ys], axis=1).astype(np.float64)
-        chains.append(order_along(pts)[TRIM_POINTS:-TRIM_POINTS])
+        pts = order_along(np.stack([xs, ys], axis=1).astype(np.float64))
+        # The polarity in the order: the gradient (dark to light) on the left of the travel
+        # direction (x right, y down: t_x g_y - t_y g_x > 0), so that pieces of one scene
+        # edge run the same way and the two sides of a bar run opposite ways.
+        travel = pts[-1] - pts[0]
+        if travel[0] * float(np.mean(gys)) - travel[1] * float(np.mean(gxs)) < 0.0:
+            pts = pts[::-1]
+        chains.append(pts[TRIM_POINTS:-TRIM_POINTS])
     return chains
 
 

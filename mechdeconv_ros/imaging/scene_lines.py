@@ -1,0 +1,137 @@
+# Copyright 2026 The mechdeconv_ros Authors.
+# SPDX-License-Identifier: Apache-2.0
+"""
+Scene lines: the straight edges that are pieces of one line of the scene, grouped.
+
+Pure numpy, no ROS. A chain of edge points is cut where it crosses another edge (a junction)
+or leaves its great circle (:mod:`~mechdeconv_ros.imaging.plumb_lines`), so one line of the
+scene (a bar of a grid crossed by the other bars, a wall edge behind a lamp) arrives as
+several pieces. Judged piece by piece, a description that bends the whole line by pixels
+reads a fraction of a pixel: each short piece fits its own great circle. So the pieces are
+grouped into lines first and each line is judged whole (docs/design.md section 2.17).
+
+Two pieces ``a``, ``b`` are of one line when, under the description's pose:
+
+1. they run the same way: their oriented normals ``n = fit normal`` signed so that ``n .
+   (d_first x d_last) > 0`` (the chain order carries the polarity, dark to light on the left:
+   :mod:`~mechdeconv_ros.imaging.straight_edges`) agree within ``MERGE_ANGLE_DEG``: the two
+   sides of a bar (opposite polarity) never join;
+2. the union of their directions fits one great circle: its largest residual angle times the
+   output focal length ``f`` (px per rad) is at most ``max(MERGE_PX, MERGE_FRACTION x chord)``
+   (``chord``: the union's largest angular extent times ``f``). The same kind of bound as the
+   split (a union that would not have been cut), looser by about 1.3 to 1.7 x: a piece's
+   bend is already up to the split's bound.
+
+The groups are the connected components of that relation (union-find): neighbours along a
+line join across a gap or a crossing, and a bent line joins through its neighbours even
+when its ends, fitted alone, would not. Distinct parallel lines of one polarity are tens of
+px apart at the periphery of these lenses (a grid's bars at their period), far above the
+bound; pieces of different scene lines on one great circle are one line of the image and
+join (they bend alike under any description).
+"""
+
+from __future__ import annotations
+
+import math
+
+from mechdeconv_ros.imaging.plumb_lines import ChiefLines, great_circles
+import numpy as np
+import numpy.typing as npt
+
+#: Oriented normals of two pieces of one line agree within this angle, deg (a pre-filter:
+#: the union's fit decides).
+MERGE_ANGLE_DEG = 6.0
+#: The union of two pieces of one line leaves its great circle by at most this (px at the
+#: output focal length) or this fraction of its chord, whichever is larger.
+MERGE_PX = 2.0
+MERGE_FRACTION = 0.01
+
+Points = npt.NDArray[np.float64]
+
+
+def _find(parent: list[int], k: int) -> int:
+    """Return the root of k (path halving)."""
+    while parent[k] != k:
+        parent[k] = parent[parent[k]]
+        k = parent[k]
+    return k
+
+
+def _joins(a: Points, b: Points, f_px: float, fraction: float = MERGE_FRACTION) -> bool:
+    """Return True when the directions a and b fit one great circle within the bound."""
+    d = np.concatenate([a, b])
+    _, vectors = np.linalg.eigh(d.T @ d)
+    worst = float(np.max(np.abs(d @ vectors[:, 0]))) * f_px
+    ends = np.stack([a[0], a[-1], b[0], b[-1]])
+    chord = math.acos(float(np.clip(np.min(ends @ ends.T), -1.0, 1.0))) * f_px
+    return worst <= max(MERGE_PX, fraction * chord)
+
+
+def oriented_normals(dirs: list[Points]) -> Points:
+    """
+    Return each piece's great-circle normal, signed by the piece's order.
+
+    :param dirs: per piece, ``(n, 3)`` finite unit directions in the chain's order.
+    :return: ``(count, 3)`` unit normals with ``n . (d_first x d_last) >= 0``.
+    """
+    out = np.zeros((len(dirs), 3))
+    for k, d in enumerate(dirs):
+        normal, _ = great_circles(d, np.zeros(d.shape[0], dtype=np.int64), 1)
+        n = normal[0]
+        out[k] = -n if float(n @ np.cross(d[0], d[-1])) < 0.0 else n
+    return out
+
+
+def group_lines(edges: list[Points], lines: ChiefLines, pose: npt.NDArray[np.float64],
+                f_px: float, short: list[Points] | None = None
+                ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """
+    Return the scene line of each straight edge and of each short piece.
+
+    Edges are linked into lines (the connected components of the relation in the module
+    docstring); a short piece joins the one line whose edges it fits, if exactly one (a line
+    of short pieces alone is no line: too short to tell a curve).
+
+    :param edges: raw points of the straight edges, each in its chain's order.
+    :param lines: the inverse.
+    :param pose: the pose the edges are judged with (the description's).
+    :param f_px: the output focal length, px per rad.
+    :param short: raw points of shorter straight pieces, each in its chain's order.
+    :return: ``(edge lines (len(edges),), short lines (len(short),))``, line numbers ``0 ..
+        lines - 1`` (-1: a short piece on no edge's line).
+    """
+    edge_dirs = _directions(edges, lines, pose)
+    parent = list(range(len(edges)))
+    usable = [k for k in range(len(edges)) if edge_dirs[k].shape[0] >= 3]
+    normals = oriented_normals([edge_dirs[k] for k in usable])
+    limit = math.cos(math.radians(MERGE_ANGLE_DEG))
+    close = normals @ normals.T > limit
+    for i, j in zip(*np.nonzero(np.triu(close, 1))):
+        a, b = usable[int(i)], usable[int(j)]
+        if _find(parent, a) != _find(parent, b) and _joins(edge_dirs[a], edge_dirs[b], f_px):
+            parent[_find(parent, a)] = _find(parent, b)
+    roots = np.array([_find(parent, k) for k in range(len(edges))], dtype=np.int64)
+    _, on_edges = np.unique(roots, return_inverse=True)
+    # A short piece joins the one line one of whose edges it fits within MERGE_PX (it never
+    # links two: a few px of a line near a vanishing point fit several of its neighbours).
+    on_short = np.full(len(short or []), -1, dtype=np.int64)
+    short_dirs = _directions(list(short or []), lines, pose)
+    for k, d in enumerate(short_dirs):
+        if d.shape[0] < 3 or not usable:
+            continue
+        n = oriented_normals([d])[0]
+        near = [usable[int(i)] for i in np.flatnonzero(normals @ n > limit)]
+        fits = {int(on_edges[e]) for e in near if _joins(edge_dirs[e], d, f_px, 0.0)}
+        if len(fits) == 1:
+            on_short[k] = fits.pop()
+    return on_edges.astype(np.int64), on_short
+
+
+def _directions(pieces: list[Points], lines: ChiefLines, pose: npt.NDArray[np.float64]
+                ) -> list[Points]:
+    """Return each piece's finite unit directions under a pose, in order."""
+    out = []
+    for piece in pieces:
+        d = lines.directions(piece, pose) if piece.shape[0] else np.zeros((0, 3))
+        out.append(d[np.all(np.isfinite(d), axis=1)])
+    return out
