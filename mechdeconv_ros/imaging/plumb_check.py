@@ -36,9 +36,16 @@ tolerances), not a confident value: a parameter whose sigma exceeds its toleranc
 reported at the description's value with that sigma, and the others are refitted with it
 held there.
 
+Straightness: the edges and the short straight pieces are grouped into whole scene lines
+(:mod:`~mechdeconv_ros.imaging.scene_lines`), and the RMS and largest distance of their
+points from their whole lines are read, px of the corrected image.
+
 Verdict: ``not_enough_edges`` under ``MIN_EDGES`` edges or ``MIN_COVERAGE`` of the field (no
-estimate is made); else ``description_off`` when the RMS straightness with the description
-exceeds ``check.max_rms_px``, else ``ok``.
+estimate is made); else ``description_off`` when any of: (1) the RMS straightness with the
+description exceeds ``check.max_rms_px``; (2) the estimate straightens: its RMS is below the
+description's over ``OFF_RATIO`` and the bend it removes, ``sqrt(before^2 - after^2)``,
+exceeds ``OFF_MIN_PX``; (3) an estimate differs from the description by more than
+``OFF_SIGMAS`` sigma and one tolerance; else ``ok``.
 """
 
 from __future__ import annotations
@@ -48,8 +55,8 @@ import math
 from typing import Any, Mapping
 
 from mechdeconv_ros.imaging.plumb_lines import (
-    ChiefLines, edge_index, field_coverage, great_circles, line_pieces, MIN_EDGE_POINTS,
-    output_focal_px, straightness_px, thin)
+    ChiefLines, edge_index, field_coverage, great_circles, line_pieces, MAX_POINTS_PER_EDGE,
+    MIN_EDGE_POINTS, output_focal_px, straightness_px, thin)
 from mechdeconv_ros.imaging.scene_lines import group_lines
 from mechdeconv_ros.imaging.straight_edges import detect_chains, Points, sample_map
 from mechdeconv_ros.optics.prescription import vertex_z
@@ -82,8 +89,13 @@ SYSTEMATIC_FRACTION = 0.03
 #: The verdict is also ``description_off`` when an estimate differs from the description by
 #: more than OFF_SIGMAS of its sigma and one tolerance.
 OFF_SIGMAS = 3.0
-#: ... or when the estimate straightens the edges by more than this factor (RMS).
+#: ... or when the estimate straightens the edges by more than this factor (RMS) and removes
+#: a bend of more than OFF_MIN_PX (in quadrature: sqrt(before^2 - after^2)).
 OFF_RATIO = 1.2
+OFF_MIN_PX = 0.05
+#: At most this many points of the straight edges enter the estimate (each edge thinned
+#: evenly to its share, between MIN_EDGE_POINTS and MAX_POINTS_PER_EDGE).
+MAX_FIT_POINTS = 6000
 #: Levenberg-Marquardt iterations.
 LM_ITERATIONS = 20
 VERDICTS = ('ok', 'description_off', 'not_enough_edges')
@@ -325,7 +337,11 @@ def check_chains(model: Any, chains: list[Points], max_rms_px: float,
     lines = ChiefLines.from_model(model)
     pose0 = nominal_pose(model)
     pieces, short = line_pieces(chains, lines, pose0, output_focal_px(model))
-    edges = [thin(piece) for piece in pieces]
+    # The fit's points: at most MAX_FIT_POINTS in all (its time grows with them; the
+    # straightness below reads every point).
+    per_edge = min(MAX_POINTS_PER_EDGE,
+                   max(MIN_EDGE_POINTS, MAX_FIT_POINTS // max(len(pieces), 1)))
+    edges = [thin(piece, per_edge) for piece in pieces]
     result = CheckResult()
     tol = tolerances(model)
     free = np.flatnonzero(tol > 0.0) if estimate else np.zeros(0, dtype=np.int64)
@@ -389,9 +405,25 @@ def check_chains(model: Any, chains: list[Points], max_rms_px: float,
     result.straightness_rms_px_after, result.straightness_max_px_after = after[0], after[1]
     moved = [abs(est['value'] - base) > max(OFF_SIGMAS * est['sigma'], est['tolerance'])
              for est, base in zip(result.estimate.values(), _bases(model, free, base_d))]
-    if after[0] * OFF_RATIO < rms or any(moved):
+    if straightens(rms, after[0]) or any(moved):
         result.verdict = 'description_off'
     return result
+
+
+def straightens(before: float, after: float) -> bool:
+    """
+    Return True when an estimate straightens the edges enough to call the description off.
+
+    Both: the RMS drops by more than ``OFF_RATIO`` and the bend it removes (in quadrature,
+    ``sqrt(before^2 - after^2)``) exceeds ``OFF_MIN_PX``: on edges at a 0.03 px floor a
+    0.005 px gain is a ratio of 1.2 and no bend anyone could see.
+
+    :param before: the straightness RMS with the description, px.
+    :param after: the same with the estimate, px.
+    :return: the rule's answer.
+    """
+    removed = math.sqrt(max(before * before - after * after, 0.0))
+    return after * OFF_RATIO < before and removed > OFF_MIN_PX
 
 
 def _bases(model: Any, free: npt.NDArray[np.int64], base_d: float) -> list[float]:

@@ -22,9 +22,11 @@ Two pieces ``a``, ``b`` are of one line when, under the description's pose:
    split (a union that would not have been cut), looser by about 1.3 to 1.7 x: a piece's
    bend is already up to the split's bound.
 
-The groups are the connected components of that relation (union-find): neighbours along a
-line join across a gap or a crossing, and a bent line joins through its neighbours even
-when its ends, fitted alone, would not. Distinct parallel lines of one polarity are tens of
+The groups are grown by union-find: two groups join when two of their pieces are of one line
+and the two groups, whole, pass test 2 too (lines crossing at a small angle, or lines of two
+frames of a window, fit one circle near the crossing, not whole). Neighbours along a line
+join across a gap or a crossing, and a bent line joins through its neighbours even when its
+ends, fitted alone, would not. Distinct parallel lines of one polarity are tens of
 px apart at the periphery of these lenses (a grid's bars at their period), far above the
 bound; pieces of different scene lines on one great circle are one line of the image and
 join (they bend alike under any description).
@@ -106,10 +108,16 @@ def group_lines(edges: list[Points], lines: ChiefLines, pose: npt.NDArray[np.flo
     normals = oriented_normals([edge_dirs[k] for k in usable])
     limit = math.cos(math.radians(MERGE_ANGLE_DEG))
     close = normals @ normals.T > limit
+    members = {k: edge_dirs[k] for k in range(len(edges))}
     for i, j in zip(*np.nonzero(np.triu(close, 1))):
-        a, b = usable[int(i)], usable[int(j)]
-        if _find(parent, a) != _find(parent, b) and _joins(edge_dirs[a], edge_dirs[b], f_px):
-            parent[_find(parent, a)] = _find(parent, b)
+        a, b = _find(parent, usable[int(i)]), _find(parent, usable[int(j)])
+        # Two lines join when their pieces do and the two lines, whole, fit one circle: the
+        # pieces of lines that cross at a small angle (or of two frames) fit near the
+        # crossing, the whole lines do not.
+        if a != b and _joins(edge_dirs[usable[int(i)]], edge_dirs[usable[int(j)]], f_px) \
+                and _joins(members[a], members[b], f_px):
+            parent[a] = b
+            members[b] = np.concatenate([members[b], members.pop(a)])
     roots = np.array([_find(parent, k) for k in range(len(edges))], dtype=np.int64)
     _, on_edges = np.unique(roots, return_inverse=True)
     # A short piece joins the one line one of whose edges it fits within MERGE_PX (it never

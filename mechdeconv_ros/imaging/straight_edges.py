@@ -6,8 +6,10 @@ Edge chains for the plumb-line check: sub-pixel edge points, linked, cut at junc
 Pure OpenCV and numpy, no ROS. Works on any single frame (raw or corrected); the geometry
 (which chains are straight in the scene) is :mod:`mechdeconv_ros.imaging.plumb_lines`.
 
-1. The frame, as 8-bit-range float grey, is smoothed by a Gaussian of ``EDGE_SIGMA_PX`` and
-   differentiated by 3x3 Sobel kernels (gx, gy); Canny (L2 gradient, hysteresis
+1. The frame, as 8-bit-range float grey at its own depth and contrast (:func:`grey`: 10-,
+   12- and 16-bit data scaled from its bits, a dim frame brightened), is smoothed by a
+   Gaussian of ``EDGE_SIGMA_PX`` and differentiated by 3x3 Sobel kernels (gx, gy); Canny (L2
+   gradient, hysteresis
    ``CANNY_LOW`` / ``CANNY_HIGH`` in Sobel units, i.e. 8x the grey step per pixel of the
    smoothed frame) keeps the one-pixel-wide ridge of the gradient magnitude ``g``.
 2. Sub-pixel position: along the unit gradient ``n`` the parabola through ``g`` at the
@@ -37,6 +39,11 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+#: A frame whose BRIGHT_PERCENTILE is below BRIGHT_LEVEL (8-bit range) is scaled up to it, by
+#: at most MAX_GAIN (:func:`grey`): a dim frame's edges are as strong as a normal one's.
+BRIGHT_PERCENTILE = 99.0
+BRIGHT_LEVEL = 128.0
+MAX_GAIN = 16.0
 #: Gaussian smoothing before the gradient, px (sigma).
 EDGE_SIGMA_PX = 1.0
 #: Canny hysteresis thresholds on the L2 Sobel gradient (3x3 kernel: 8 x grey step / px).
@@ -59,17 +66,29 @@ Points = npt.NDArray[np.float64]
 
 def grey(image: np.ndarray) -> npt.NDArray[np.float32]:
     """
-    Return the frame as float32 grey scaled to the 8-bit range.
+    Return the frame as float32 grey in the 8-bit range, at its depth and contrast.
 
-    :param image: ``(H, W)`` or ``(H, W, C)`` (C = 3 or 4, BGR order), uint8, uint16 or float.
+    Integer data wider than 8 bits (``mono16`` of a 10-, 12- or 16-bit sensor) is scaled by
+    ``255 / (2^b - 1)``, ``b`` the bits its largest value needs (at least 8); then a dim
+    frame is brightened so that its ``BRIGHT_PERCENTILE`` reaches ``BRIGHT_LEVEL`` (a gain of
+    at most ``MAX_GAIN``, never below 1): the edge thresholds are relative to the frame's
+    contrast, not to full scale.
+
+    :param image: ``(H, W)`` or ``(H, W, C)`` (C = 3 or 4, BGR order), uint8, uint16 or float
+        (8-bit range).
     :return: ``(H, W)`` float32.
     """
     img = np.asarray(image)
-    if img.ndim == 3:
-        img = img[..., :3].astype(np.float32).mean(axis=2)
-    out = img.astype(np.float32)
-    if np.asarray(image).dtype == np.uint16:
-        out *= np.float32(255.0 / 65535.0)
+    out = (img[..., :3].astype(np.float32).mean(axis=2) if img.ndim == 3
+           else img.astype(np.float32))
+    if np.issubdtype(img.dtype, np.integer) and img.dtype.itemsize > 1 and img.size:
+        bits = max(8, int(img.max()).bit_length())
+        out *= np.float32(255.0 / (2.0 ** bits - 1.0))
+    if out.size:
+        bright = float(np.percentile(out[::4, ::4], BRIGHT_PERCENTILE))
+        gain = min(max(BRIGHT_LEVEL / max(bright, 1e-6), 1.0), MAX_GAIN)
+        if gain > 1.0:
+            out *= np.float32(gain)
     return out
 
 
