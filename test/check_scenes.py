@@ -442,3 +442,50 @@ def whole_line_rms(model: object, points: np.ndarray, line: np.ndarray,
             normal = np.linalg.eigh(d.T @ d)[1][:, 0]
             squares.append((d @ normal * f) ** 2)
     return float(np.sqrt(np.mean(np.concatenate(squares)))) if squares else float('nan')
+
+
+#: The kinds of frame a real camera sends (:func:`as_sent`).
+KINDS = ('jpeg80', 'bayer', 'motion3', 'mono16_10bit', 'mono16_12bit', 'dim20')
+
+
+def half_size(frame: np.ndarray) -> np.ndarray:
+    """Return a frame at half the size (2 x 2 pixel means: a sensor of twice the pitch)."""
+    h, w = frame.shape[:2]
+    return cv2.resize(frame, (w // 2, h // 2), interpolation=cv2.INTER_AREA)
+
+
+def as_sent(frame: np.ndarray, kind: str, seed: int = 0) -> np.ndarray:
+    """
+    Return an 8-bit grey render as a real camera would send it.
+
+    ``jpeg80``: JPEG at quality 80, decoded; ``bayer``: a tinted colour frame (R 0.9, B 0.7
+    of the grey) mosaicked RGGB and demosaiced by OpenCV (BGR); ``motion3``: a 3 px
+    horizontal box blur; ``mono16_10bit`` and ``mono16_12bit``: uint16 up to 1023 and
+    4095 with the sensor's own noise (1 LSB); ``dim20``: scaled to a mean of 20 grey levels,
+    noise 0.5 level, 8 bits.
+    """
+    rng = np.random.default_rng(seed)
+    grey = frame.astype(np.float64)
+    if kind == 'jpeg80':
+        ok, data = cv2.imencode('.jpg', frame, [cv2.IMWRITE_JPEG_QUALITY, 80])
+        return cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    if kind == 'bayer':
+        bgr = np.stack([0.7 * grey, grey, 0.9 * grey], axis=-1)
+        mosaic = np.empty(grey.shape)
+        mosaic[0::2, 0::2] = bgr[0::2, 0::2, 2]
+        mosaic[0::2, 1::2] = bgr[0::2, 1::2, 1]
+        mosaic[1::2, 0::2] = bgr[1::2, 0::2, 1]
+        mosaic[1::2, 1::2] = bgr[1::2, 1::2, 0]
+        raw = np.clip(np.rint(mosaic), 0, 255).astype(np.uint8)
+        return cv2.cvtColor(raw, cv2.COLOR_BayerRG2BGR)
+    if kind == 'motion3':
+        return cv2.blur(frame, (3, 1))
+    if kind in ('mono16_10bit', 'mono16_12bit'):
+        top = 1023.0 if kind == 'mono16_10bit' else 4095.0
+        value = grey * top / 255.0 + rng.standard_normal(grey.shape)
+        return np.clip(np.rint(value), 0, top).astype(np.uint16)
+    if kind == 'dim20':
+        value = grey * 20.0 / max(float(grey.mean()), 1e-9)
+        value += 0.5 * rng.standard_normal(grey.shape)
+        return np.clip(np.rint(value), 0, 255).astype(np.uint8)
+    raise ValueError(f'unknown kind {kind}')

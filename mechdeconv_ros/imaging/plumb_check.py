@@ -58,7 +58,8 @@ from mechdeconv_ros.imaging.plumb_lines import (
     ChiefLines, edge_index, field_coverage, great_circles, line_pieces, MAX_POINTS_PER_EDGE,
     MIN_EDGE_POINTS, output_focal_px, straightness_px, thin)
 from mechdeconv_ros.imaging.scene_lines import group_lines
-from mechdeconv_ros.imaging.straight_edges import detect_chains, Points, sample_map
+from mechdeconv_ros.imaging.straight_edges import (
+    detect_chains, frame_of, Points, sample_map, tagged)
 from mechdeconv_ros.optics.prescription import vertex_z
 import numpy as np
 import numpy.typing as npt
@@ -173,7 +174,7 @@ def chains_from_corrected(image: np.ndarray, map_x: np.ndarray, map_y: np.ndarra
     :param image: the corrected frame.
     :param map_x: the remap's float map of raw x per corrected pixel.
     :param map_y: the same for raw y.
-    :return: raw chains (NaN-free).
+    :return: raw chains (NaN-free), tagged with their frame.
     """
     valid = (map_x >= 0) & (map_y >= 0)
     out = []
@@ -181,7 +182,7 @@ def chains_from_corrected(image: np.ndarray, map_x: np.ndarray, map_y: np.ndarra
         raw = sample_map(map_x, map_y, chain)
         raw = raw[np.all(np.isfinite(raw), axis=1)]
         if raw.shape[0] >= 8:
-            out.append(raw)
+            out.append(tagged(raw, frame_of(chain)))
     return out
 
 
@@ -323,6 +324,13 @@ def _sigma(problem: _Problem, x: npt.NDArray[np.float64],
     return np.minimum(np.sqrt(var), SIGMA_CAP) * scale
 
 
+def _fit_points(pieces: list[Points]) -> list[Points]:
+    """Thin the edges to at most MAX_FIT_POINTS in all (the fit's time grows with them)."""
+    per_edge = min(MAX_POINTS_PER_EDGE,
+                   max(MIN_EDGE_POINTS, MAX_FIT_POINTS // max(len(pieces), 1)))
+    return [thin(piece, per_edge) for piece in pieces]
+
+
 def check_chains(model: Any, chains: list[Points], max_rms_px: float,
                  estimate: bool = True) -> CheckResult:
     """
@@ -337,11 +345,7 @@ def check_chains(model: Any, chains: list[Points], max_rms_px: float,
     lines = ChiefLines.from_model(model)
     pose0 = nominal_pose(model)
     pieces, short = line_pieces(chains, lines, pose0, output_focal_px(model))
-    # The fit's points: at most MAX_FIT_POINTS in all (its time grows with them; the
-    # straightness below reads every point).
-    per_edge = min(MAX_POINTS_PER_EDGE,
-                   max(MIN_EDGE_POINTS, MAX_FIT_POINTS // max(len(pieces), 1)))
-    edges = [thin(piece, per_edge) for piece in pieces]
+    edges = _fit_points(pieces)
     result = CheckResult()
     tol = tolerances(model)
     free = np.flatnonzero(tol > 0.0) if estimate else np.zeros(0, dtype=np.int64)
@@ -394,7 +398,14 @@ def check_chains(model: Any, chains: list[Points], max_rms_px: float,
         x[seen] = xs
         sigma = full_sigma.copy()
         sigma[seen] = _sigma(reduced, xs, tol[free[seen]])
-    pose = problem.pose(x)
+    _judge(result, model, problem.pose(x), free, sigma, tol, whole)
+    return result
+
+
+def _judge(result: CheckResult, model: Any, pose: npt.NDArray[np.float64],
+           free: npt.NDArray[np.int64], sigma: npt.NDArray[np.float64],
+           tol: npt.NDArray[np.float64], whole: _WholeLines) -> None:
+    """Fill in the estimate and the straightness after it; apply the rules (2) and (3)."""
     base_d = image_distance_base(model)
     for j, k in enumerate(free):
         name = ESTIMATED[k][0]
@@ -405,9 +416,8 @@ def check_chains(model: Any, chains: list[Points], max_rms_px: float,
     result.straightness_rms_px_after, result.straightness_max_px_after = after[0], after[1]
     moved = [abs(est['value'] - base) > max(OFF_SIGMAS * est['sigma'], est['tolerance'])
              for est, base in zip(result.estimate.values(), _bases(model, free, base_d))]
-    if straightens(rms, after[0]) or any(moved):
+    if straightens(result.straightness_rms_px, after[0]) or any(moved):
         result.verdict = 'description_off'
-    return result
 
 
 def straightens(before: float, after: float) -> bool:

@@ -230,8 +230,11 @@ def line_pieces(chains: list[Points], lines: ChiefLines, pose: npt.NDArray[np.fl
         line that has an edge (:mod:`~mechdeconv_ros.imaging.scene_lines`).
     """
     edges, short = [], []
-    for chain in chains:
-        dirs = lines.directions(chain, pose)
+    if not chains:
+        return edges, short
+    # One inverse for all the chains (its tables' derivatives are made per call).
+    every = lines.directions(np.concatenate([np.asarray(c) for c in chains]), pose)
+    for chain, dirs in zip(chains, np.split(every, np.cumsum([c.shape[0] for c in chains])[:-1])):
         good = np.all(np.isfinite(dirs), axis=1)
         chain, dirs = chain[good], dirs[good]
         pieces: list[tuple[int, int, bool]] = []

@@ -22,9 +22,11 @@ Two pieces ``a``, ``b`` are of one line when, under the description's pose:
    split (a union that would not have been cut), looser by about 1.3 to 1.7 x: a piece's
    bend is already up to the split's bound.
 
-The groups are grown by union-find: two groups join when two of their pieces are of one line
-and the two groups, whole, pass test 2 too (lines crossing at a small angle, or lines of two
-frames of a window, fit one circle near the crossing, not whole). Neighbours along a line
+Only pieces of one frame join (:class:`~mechdeconv_ros.imaging.straight_edges.FrameChain`:
+the node pools the chains of ``check.window`` frames, and a moving camera's frames hold
+different lines). The groups are grown by union-find: two groups join when two of their
+pieces are of one line and the two groups, whole, pass test 2 too (lines crossing at a small
+angle fit one circle near the crossing, not whole). Neighbours along a line
 join across a gap or a crossing, and a bent line joins through its neighbours even when its
 ends, fitted alone, would not. Distinct parallel lines of one polarity are tens of
 px apart at the periphery of these lenses (a grid's bars at their period), far above the
@@ -37,6 +39,7 @@ from __future__ import annotations
 import math
 
 from mechdeconv_ros.imaging.plumb_lines import ChiefLines, great_circles
+from mechdeconv_ros.imaging.straight_edges import frame_of
 import numpy as np
 import numpy.typing as npt
 
@@ -109,27 +112,32 @@ def group_lines(edges: list[Points], lines: ChiefLines, pose: npt.NDArray[np.flo
     limit = math.cos(math.radians(MERGE_ANGLE_DEG))
     close = normals @ normals.T > limit
     members = {k: edge_dirs[k] for k in range(len(edges))}
+    frames = [frame_of(edge) for edge in edges]
     for i, j in zip(*np.nonzero(np.triu(close, 1))):
         a, b = _find(parent, usable[int(i)]), _find(parent, usable[int(j)])
         # Two lines join when their pieces do and the two lines, whole, fit one circle: the
         # pieces of lines that cross at a small angle (or of two frames) fit near the
         # crossing, the whole lines do not.
-        if a != b and _joins(edge_dirs[usable[int(i)]], edge_dirs[usable[int(j)]], f_px) \
-                and _joins(members[a], members[b], f_px):
+        if a != b and frames[usable[int(i)]] == frames[usable[int(j)]] and _joins(
+                edge_dirs[usable[int(i)]], edge_dirs[usable[int(j)]], f_px) and _joins(
+                members[a], members[b], f_px):
             parent[a] = b
             members[b] = np.concatenate([members[b], members.pop(a)])
     roots = np.array([_find(parent, k) for k in range(len(edges))], dtype=np.int64)
     _, on_edges = np.unique(roots, return_inverse=True)
     # A short piece joins the one line one of whose edges it fits within MERGE_PX (it never
     # links two: a few px of a line near a vanishing point fit several of its neighbours).
-    on_short = np.full(len(short or []), -1, dtype=np.int64)
-    short_dirs = _directions(list(short or []), lines, pose)
+    short = list(short or [])
+    on_short = np.full(len(short), -1, dtype=np.int64)
+    short_dirs = _directions(short, lines, pose)
     for k, d in enumerate(short_dirs):
         if d.shape[0] < 3 or not usable:
             continue
         n = oriented_normals([d])[0]
         near = [usable[int(i)] for i in np.flatnonzero(normals @ n > limit)]
-        fits = {int(on_edges[e]) for e in near if _joins(edge_dirs[e], d, f_px, 0.0)}
+        frame = frame_of(short[k])
+        fits = {int(on_edges[e]) for e in near
+                if frames[e] == frame and _joins(edge_dirs[e], d, f_px, 0.0)}
         if len(fits) == 1:
             on_short[k] = fits.pop()
     return on_edges.astype(np.int64), on_short
@@ -137,9 +145,11 @@ def group_lines(edges: list[Points], lines: ChiefLines, pose: npt.NDArray[np.flo
 
 def _directions(pieces: list[Points], lines: ChiefLines, pose: npt.NDArray[np.float64]
                 ) -> list[Points]:
-    """Return each piece's finite unit directions under a pose, in order."""
-    out = []
-    for piece in pieces:
-        d = lines.directions(piece, pose) if piece.shape[0] else np.zeros((0, 3))
-        out.append(d[np.all(np.isfinite(d), axis=1)])
-    return out
+    """Return each piece's finite unit directions under a pose, in order (one inverse)."""
+    if not pieces:
+        return []
+    sizes = [piece.shape[0] for piece in pieces]
+    points = np.concatenate([np.asarray(piece).reshape(-1, 2) for piece in pieces])
+    dirs = lines.directions(points, pose)
+    return [d[np.all(np.isfinite(d), axis=1)]
+            for d in np.split(dirs, np.cumsum(sizes)[:-1])]

@@ -33,6 +33,7 @@ Sign conventions: pixel (x, y) = (column, row) with the centre of the top-left p
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import cv2
@@ -62,6 +63,44 @@ TRIM_POINTS = 4
 MIN_CHAIN_POINTS = 24
 
 Points = npt.NDArray[np.float64]
+
+#: Each call of :func:`detect_chains` tags its chains with the next number (their frame).
+_FRAMES = itertools.count()
+
+
+class FrameChain(np.ndarray):
+    """
+    An edge chain (``(N, 2)`` float points) that knows the frame it was found in.
+
+    ``frame`` is a number unique to one call of :func:`detect_chains`; slices and copies keep
+    it, so pieces of a chain pooled with other frames' (the node's window, several images)
+    still say where they came from: lines are grouped within one frame
+    (:mod:`~mechdeconv_ros.imaging.scene_lines`).
+    """
+
+    frame: int | None
+
+    def __array_finalize__(self, obj: object) -> None:
+        """Keep the frame of the array this one is made from."""
+        self.frame = getattr(obj, 'frame', None)
+
+
+def tagged(points: np.ndarray, frame: int | None) -> FrameChain:
+    """
+    Return points as a :class:`FrameChain` of a frame.
+
+    :param points: ``(N, 2)``.
+    :param frame: the frame's number (None: unknown).
+    :return: a view of the points.
+    """
+    out = np.asarray(points).view(FrameChain)
+    out.frame = frame
+    return out
+
+
+def frame_of(points: np.ndarray) -> int | None:
+    """Return the frame number of a chain or piece (None: untagged)."""
+    return getattr(points, 'frame', None)
 
 
 def grey(image: np.ndarray) -> npt.NDArray[np.float32]:
@@ -130,7 +169,8 @@ def detect_chains(image: np.ndarray, valid: npt.NDArray[np.bool_] | None = None
     :param valid: optional mask of the pixels that hold image (False: black outside the
         image circle or the corrected field); ridges within 4 px of its border, or of a
         black (below ``DARK_LEVEL``) region, are dropped.
-    :return: the chains with at least ``MIN_CHAIN_POINTS`` points.
+    :return: the chains with at least ``MIN_CHAIN_POINTS`` points, tagged with one new frame
+        number (:class:`FrameChain`).
     """
     g = cv2.GaussianBlur(grey(image), (0, 0), EDGE_SIGMA_PX)
     lit = g > DARK_LEVEL
@@ -172,6 +212,7 @@ def detect_chains(image: np.ndarray, valid: npt.NDArray[np.bool_] | None = None
     lab, x, y, nx, ny = lab[order], x[order], y[order], nx[order], ny[order]
     bounds = np.flatnonzero(np.diff(lab)) + 1
     chains = []
+    frame = next(_FRAMES)
     for xs, ys, gxs, gys in zip(*(np.split(a, bounds) for a in (x, y, nx, ny))):
         if xs.size < MIN_CHAIN_POINTS + 2 * TRIM_POINTS:
             continue
@@ -182,7 +223,7 @@ def detect_chains(image: np.ndarray, valid: npt.NDArray[np.bool_] | None = None
         travel = pts[-1] - pts[0]
         if travel[0] * float(np.mean(gys)) - travel[1] * float(np.mean(gxs)) < 0.0:
             pts = pts[::-1]
-        chains.append(pts[TRIM_POINTS:-TRIM_POINTS])
+        chains.append(tagged(pts[TRIM_POINTS:-TRIM_POINTS], frame))
     return chains
 
 
