@@ -17,7 +17,8 @@ Two pieces ``a``, ``b`` are of one line when, under the description's pose:
    :mod:`~mechdeconv_ros.imaging.straight_edges`) agree within ``MERGE_ANGLE_DEG``: the two
    sides of a bar (opposite polarity) never join;
 2. the union of their directions fits one great circle: its largest residual angle times the
-   output focal length ``f`` (px per rad) is at most ``max(MERGE_PX, MERGE_FRACTION x chord)``
+   output focal length ``f`` (px per rad) and, for a pinhole output, its stretch ``1 /
+   cos^2(theta)`` there (up to its corner's) is at most ``max(MERGE_PX, MERGE_FRACTION x chord)``
    (``chord``: the union's largest angular extent times ``f``). The same kind of bound as the
    split (a union that would not have been cut), looser by about 1.3 to 1.7 x: a piece's
    bend is already up to the split's bound.
@@ -26,7 +27,9 @@ Only pieces of one frame join (:class:`~mechdeconv_ros.imaging.straight_edges.Fr
 the node pools the chains of ``check.window`` frames, and a moving camera's frames hold
 different lines). The groups are grown by union-find: two groups join when two of their
 pieces are of one line and the two groups, whole, pass test 2 too (lines crossing at a small
-angle fit one circle near the crossing, not whole). Neighbours along a line
+angle fit one circle near the crossing, not whole) and lie side by side along their common
+circle (3. a frame sees a line once: pieces of one line do not overlap along it, by more than
+``OVERLAP_PX``; two lines that cross or converge do). Neighbours along a line
 join across a gap or a crossing, and a bent line joins through its neighbours even when its
 ends, fitted alone, would not. Distinct parallel lines of one polarity are tens of
 px apart at the periphery of these lenses (a grid's bars at their period), far above the
@@ -50,6 +53,13 @@ MERGE_ANGLE_DEG = 6.0
 #: output focal length) or this fraction of its chord, whichever is larger.
 MERGE_PX = 2.0
 MERGE_FRACTION = 0.01
+#: ... two pieces (neighbours along a bent line join; far ones join through them) by this
+#: fraction of their own chords (the gap between them adds none): two lines of a frame far
+#: apart on nearly one circle do not.
+PIECE_FRACTION = 0.005
+#: Pieces of one line lie side by side along it (one frame sees a line once): their extents
+#: along the common circle may overlap by this much, px (the ends cut at a junction).
+OVERLAP_PX = 3.0
 
 Points = npt.NDArray[np.float64]
 
@@ -62,14 +72,64 @@ def _find(parent: list[int], k: int) -> int:
     return k
 
 
-def _joins(a: Points, b: Points, f_px: float, fraction: float = MERGE_FRACTION) -> bool:
-    """Return True when the directions a and b fit one great circle within the bound."""
+def _joins(a: Points, b: Points, f_px: float, fraction: float = MERGE_FRACTION,
+           limit: float = 1.0, own: bool = False) -> bool:
+    """
+    Return True when the directions a and b fit one great circle within the bound.
+
+    The residual angle counts at ``f_px`` times the output's stretch there: 1 for an
+    equidistant output, ``1 / cos^2(theta)`` up to ``limit`` (its value at the corrected
+    image's corner) for a pinhole one, whose straightness is read in its own px. The
+    fraction is of the union's chord, or (``own``) of the sum of the two pieces' chords.
+    """
     d = np.concatenate([a, b])
     _, vectors = np.linalg.eigh(d.T @ d)
-    worst = float(np.max(np.abs(d @ vectors[:, 0]))) * f_px
-    ends = np.stack([a[0], a[-1], b[0], b[-1]])
-    chord = math.acos(float(np.clip(np.min(ends @ ends.T), -1.0, 1.0))) * f_px
+    stretch = 1.0 / np.maximum(d[:, 2] ** 2, 1.0 / limit) if limit > 1.0 else 1.0
+    worst = float(np.max(np.abs(d @ vectors[:, 0]) * stretch)) * f_px
+    if own:
+        # The pieces' own chords, not the gap: far pieces get no more room than near ones.
+        chord = (_arc(a[0], a[-1]) + _arc(b[0], b[-1])) * f_px
+    else:
+        ends = np.stack([a[0], a[-1], b[0], b[-1]])
+        chord = math.acos(float(np.clip(np.min(ends @ ends.T), -1.0, 1.0))) * f_px
     return worst <= max(MERGE_PX, fraction * chord)
+
+
+def _arc(p: Points, q: Points) -> float:
+    """Return the angle between two unit directions, rad."""
+    return math.acos(float(np.clip(p @ q, -1.0, 1.0)))
+
+
+def _side_by_side(parts_a: list[Points], parts_b: list[Points], f_px: float) -> bool:
+    """
+    Return True when no piece of a overlaps a piece of b along their common great circle.
+
+    Each piece's extent is its interval of angle about the normal of the union's circle
+    (from the union's mean direction); two intervals may overlap by ``OVERLAP_PX`` (the ends
+    of pieces cut at a junction).
+    """
+    d = np.concatenate(parts_a + parts_b)
+    _, vectors = np.linalg.eigh(d.T @ d)
+    normal = vectors[:, 0]
+    e1 = d.mean(axis=0)
+    e1 = e1 - (e1 @ normal) * normal
+    e1 /= max(float(np.linalg.norm(e1)), 1e-12)
+    e2 = np.cross(normal, e1)
+    spans = [(float(np.min(a)), float(np.max(a)))
+             for a in (np.arctan2(p @ e2, p @ e1) for p in parts_a + parts_b)]
+    slack = OVERLAP_PX / f_px
+    for lo_a, hi_a in spans[:len(parts_a)]:
+        for lo_b, hi_b in spans[len(parts_a):]:
+            if min(hi_a, hi_b) - max(lo_a, lo_b) > slack:
+                return False
+    return True
+
+
+def _one_line(parts_a: list[Points], parts_b: list[Points], f_px: float, limit: float
+              ) -> bool:
+    """Return True when two lines, whole, are one: one circle, pieces side by side."""
+    return (_joins(np.concatenate(parts_a), np.concatenate(parts_b), f_px, limit=limit)
+            and _side_by_side(parts_a, parts_b, f_px))
 
 
 def oriented_normals(dirs: list[Points]) -> Points:
@@ -88,7 +148,7 @@ def oriented_normals(dirs: list[Points]) -> Points:
 
 
 def group_lines(edges: list[Points], lines: ChiefLines, pose: npt.NDArray[np.float64],
-                f_px: float, short: list[Points] | None = None
+                f_px: float, short: list[Points] | None = None, limit: float = 1.0
                 ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
     """
     Return the scene line of each straight edge and of each short piece.
@@ -102,6 +162,8 @@ def group_lines(edges: list[Points], lines: ChiefLines, pose: npt.NDArray[np.flo
     :param pose: the pose the edges are judged with (the description's).
     :param f_px: the output focal length, px per rad.
     :param short: raw points of shorter straight pieces, each in its chain's order.
+    :param limit: a pinhole output's largest stretch ``1 / cos^2(theta)`` (at its corner; 1:
+        an equidistant output): the bounds are in the output's px.
     :return: ``(edge lines (len(edges),), short lines (len(short),))``, line numbers ``0 ..
         lines - 1`` (-1: a short piece on no edge's line).
     """
@@ -109,20 +171,21 @@ def group_lines(edges: list[Points], lines: ChiefLines, pose: npt.NDArray[np.flo
     parent = list(range(len(edges)))
     usable = [k for k in range(len(edges)) if edge_dirs[k].shape[0] >= 3]
     normals = oriented_normals([edge_dirs[k] for k in usable])
-    limit = math.cos(math.radians(MERGE_ANGLE_DEG))
-    close = normals @ normals.T > limit
-    members = {k: edge_dirs[k] for k in range(len(edges))}
+    cos_limit = math.cos(math.radians(MERGE_ANGLE_DEG))
+    close = normals @ normals.T > cos_limit
+    members = {k: [edge_dirs[k]] for k in range(len(edges))}
     frames = [frame_of(edge) for edge in edges]
     for i, j in zip(*np.nonzero(np.triu(close, 1))):
         a, b = _find(parent, usable[int(i)]), _find(parent, usable[int(j)])
         # Two lines join when their pieces do and the two lines, whole, fit one circle: the
-        # pieces of lines that cross at a small angle (or of two frames) fit near the
-        # crossing, the whole lines do not.
+        # pieces of lines that cross at a small angle fit near the crossing, the whole lines
+        # do not; and their pieces lie side by side along it (a line is seen once a frame).
         if a != b and frames[usable[int(i)]] == frames[usable[int(j)]] and _joins(
-                edge_dirs[usable[int(i)]], edge_dirs[usable[int(j)]], f_px) and _joins(
-                members[a], members[b], f_px):
+                edge_dirs[usable[int(i)]], edge_dirs[usable[int(j)]], f_px,
+                PIECE_FRACTION, limit, own=True) and _one_line(
+                members[a], members[b], f_px, limit):
             parent[a] = b
-            members[b] = np.concatenate([members[b], members.pop(a)])
+            members[b] = members[b] + members.pop(a)
     roots = np.array([_find(parent, k) for k in range(len(edges))], dtype=np.int64)
     _, on_edges = np.unique(roots, return_inverse=True)
     # A short piece joins the one line one of whose edges it fits within MERGE_PX (it never
@@ -134,10 +197,11 @@ def group_lines(edges: list[Points], lines: ChiefLines, pose: npt.NDArray[np.flo
         if d.shape[0] < 3 or not usable:
             continue
         n = oriented_normals([d])[0]
-        near = [usable[int(i)] for i in np.flatnonzero(normals @ n > limit)]
+        near = [usable[int(i)] for i in np.flatnonzero(normals @ n > cos_limit)]
         frame = frame_of(short[k])
         fits = {int(on_edges[e]) for e in near
-                if frames[e] == frame and _joins(edge_dirs[e], d, f_px, 0.0)}
+                if frames[e] == frame and _joins(edge_dirs[e], d, f_px, 0.0, limit)
+                and _side_by_side(members[_find(parent, e)], [d], f_px)}
         if len(fits) == 1:
             on_short[k] = fits.pop()
     return on_edges.astype(np.int64), on_short
