@@ -442,24 +442,13 @@ def _bases(model: Any, free: npt.NDArray[np.int64], base_d: float) -> list[float
     return [float(pose0[k]) if k < 4 else base_d for k in free]
 
 
-def _corner_stretch(model: Any) -> float:
-    """Return a pinhole output's ``1 / cos^2(theta)`` at its farthest corner (else 1)."""
-    if model.projection != 'pinhole':
-        return 1.0
-    k = model.K_new
-    xs = (np.array([0.0, model.out_width - 1.0]) - k[0, 2]) / k[0, 0]
-    ys = (np.array([0.0, model.out_height - 1.0]) - k[1, 2]) / k[1, 1]
-    return 1.0 + float(np.max(xs ** 2)) + float(np.max(ys ** 2))
-
-
 class _WholeLines:
     """The points of whole scene lines: straight edges and the short pieces on their lines."""
 
     def __init__(self, model: Any, lines: ChiefLines, edges: list[Points], short: list[Points],
                  pose0: npt.NDArray[np.float64]):
         self.model, self.lines = model, lines
-        on_edges, on_short = group_lines(edges, lines, pose0, output_focal_px(model), short,
-                                         _corner_stretch(model))
+        on_edges, on_short = group_lines(edges, lines, pose0, output_focal_px(model), short)
         joined = [k for k in range(len(short)) if on_short[k] >= 0]
         parts = list(edges) + [short[k] for k in joined]
         self.points = np.concatenate(parts) if parts else np.zeros((0, 2))

@@ -10,31 +10,34 @@ several pieces. Judged piece by piece, a description that bends the whole line b
 reads a fraction of a pixel: each short piece fits its own great circle. So the pieces are
 grouped into lines first and each line is judged whole (docs/design.md section 2.17).
 
-Two pieces ``a``, ``b`` are of one line when, under the description's pose:
+Under the description's pose, within one frame
+(:class:`~mechdeconv_ros.imaging.straight_edges.FrameChain`: the node pools the chains of
+``check.window`` frames, and a moving camera's frames hold different lines), by union-find
+over the straight edges, two lines A and B (at first one edge each) join when an edge a of A
+and an edge b of B
 
-1. they run the same way: their oriented normals ``n = fit normal`` signed so that ``n .
-   (d_first x d_last) > 0`` (the chain order carries the polarity, dark to light on the left:
-   :mod:`~mechdeconv_ros.imaging.straight_edges`) agree within ``MERGE_ANGLE_DEG``: the two
+1. run the same way: their normals, signed so that ``n . (d_first x d_last) > 0`` (the chain
+   order carries the polarity, dark to light on the left:
+   :mod:`~mechdeconv_ros.imaging.straight_edges`), agree within ``MERGE_ANGLE_DEG``: the two
    sides of a bar (opposite polarity) never join;
-2. the union of their directions fits one great circle: its largest residual angle times the
-   output focal length ``f`` (px per rad) and, for a pinhole output, its stretch ``1 /
-   cos^2(theta)`` there (up to its corner's) is at most ``max(MERGE_PX, MERGE_FRACTION x chord)``
-   (``chord``: the union's largest angular extent times ``f``). The same kind of bound as the
-   split (a union that would not have been cut), looser by about 1.3 to 1.7 x: a piece's
-   bend is already up to the split's bound.
+2. fit one great circle together: the largest residual angle of ``a u b`` times the output
+   focal length ``f`` (px per rad) is at most ``max(MERGE_PX, PIECE_FRACTION x (chord(a) +
+   chord(b)))``, chords of the pieces themselves (the gap between them adds no room:
+   neighbours along a bent line join, its far pieces join through them, and two lines far
+   apart on nearly one circle do not);
 
-Only pieces of one frame join (:class:`~mechdeconv_ros.imaging.straight_edges.FrameChain`:
-the node pools the chains of ``check.window`` frames, and a moving camera's frames hold
-different lines). The groups are grown by union-find: two groups join when two of their
-pieces are of one line and the two groups, whole, pass test 2 too (lines crossing at a small
-angle fit one circle near the crossing, not whole) and lie side by side along their common
-circle (3. a frame sees a line once: pieces of one line do not overlap along it, by more than
-``OVERLAP_PX``; two lines that cross or converge do). Neighbours along a line
-join across a gap or a crossing, and a bent line joins through its neighbours even when its
-ends, fitted alone, would not. Distinct parallel lines of one polarity are tens of
-px apart at the periphery of these lenses (a grid's bars at their period), far above the
-bound; pieces of different scene lines on one great circle are one line of the image and
-join (they bend alike under any description).
+and A and B, whole,
+
+3. fit one great circle: largest residual at most ``max(MERGE_PX, MERGE_FRACTION x chord(A
+   u B))`` (lines crossing at a small angle fit one circle near the crossing, not whole);
+4. lie side by side along it: a frame sees a line once, so no piece of A overlaps a piece of
+   B along the common circle by more than ``OVERLAP_PX`` (lines that cross or converge do).
+
+A short piece (12 to 48 px) joins the one line with an edge it fits within ``MERGE_PX`` (1,
+2 with no fraction) and 4; a line of short pieces alone is none. The bounds are in px at the
+centre scale of the output: a bend of more than about 3.5 px RMS splits some lines (measured:
+docs/design.md section 2.17), and two lines of one frame within 2 px of one great circle
+read as one (in a pinhole output, px grow towards its edge by up to ``1 / cos^2(theta)``).
 """
 
 from __future__ import annotations
@@ -56,7 +59,7 @@ MERGE_FRACTION = 0.01
 #: ... two pieces (neighbours along a bent line join; far ones join through them) by this
 #: fraction of their own chords (the gap between them adds none): two lines of a frame far
 #: apart on nearly one circle do not.
-PIECE_FRACTION = 0.005
+PIECE_FRACTION = 0.003
 #: Pieces of one line lie side by side along it (one frame sees a line once): their extents
 #: along the common circle may overlap by this much, px (the ends cut at a junction).
 OVERLAP_PX = 3.0
@@ -73,19 +76,15 @@ def _find(parent: list[int], k: int) -> int:
 
 
 def _joins(a: Points, b: Points, f_px: float, fraction: float = MERGE_FRACTION,
-           limit: float = 1.0, own: bool = False) -> bool:
+           own: bool = False) -> bool:
     """
     Return True when the directions a and b fit one great circle within the bound.
 
-    The residual angle counts at ``f_px`` times the output's stretch there: 1 for an
-    equidistant output, ``1 / cos^2(theta)`` up to ``limit`` (its value at the corrected
-    image's corner) for a pinhole one, whose straightness is read in its own px. The
-    fraction is of the union's chord, or (``own``) of the sum of the two pieces' chords.
+    The fraction is of the union's chord, or (``own``) of the sum of the two pieces' chords.
     """
     d = np.concatenate([a, b])
     _, vectors = np.linalg.eigh(d.T @ d)
-    stretch = 1.0 / np.maximum(d[:, 2] ** 2, 1.0 / limit) if limit > 1.0 else 1.0
-    worst = float(np.max(np.abs(d @ vectors[:, 0]) * stretch)) * f_px
+    worst = float(np.max(np.abs(d @ vectors[:, 0]))) * f_px
     if own:
         # The pieces' own chords, not the gap: far pieces get no more room than near ones.
         chord = (_arc(a[0], a[-1]) + _arc(b[0], b[-1])) * f_px
@@ -125,10 +124,9 @@ def _side_by_side(parts_a: list[Points], parts_b: list[Points], f_px: float) -> 
     return True
 
 
-def _one_line(parts_a: list[Points], parts_b: list[Points], f_px: float, limit: float
-              ) -> bool:
+def _one_line(parts_a: list[Points], parts_b: list[Points], f_px: float) -> bool:
     """Return True when two lines, whole, are one: one circle, pieces side by side."""
-    return (_joins(np.concatenate(parts_a), np.concatenate(parts_b), f_px, limit=limit)
+    return (_joins(np.concatenate(parts_a), np.concatenate(parts_b), f_px)
             and _side_by_side(parts_a, parts_b, f_px))
 
 
@@ -148,7 +146,7 @@ def oriented_normals(dirs: list[Points]) -> Points:
 
 
 def group_lines(edges: list[Points], lines: ChiefLines, pose: npt.NDArray[np.float64],
-                f_px: float, short: list[Points] | None = None, limit: float = 1.0
+                f_px: float, short: list[Points] | None = None
                 ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
     """
     Return the scene line of each straight edge and of each short piece.
@@ -162,8 +160,6 @@ def group_lines(edges: list[Points], lines: ChiefLines, pose: npt.NDArray[np.flo
     :param pose: the pose the edges are judged with (the description's).
     :param f_px: the output focal length, px per rad.
     :param short: raw points of shorter straight pieces, each in its chain's order.
-    :param limit: a pinhole output's largest stretch ``1 / cos^2(theta)`` (at its corner; 1:
-        an equidistant output): the bounds are in the output's px.
     :return: ``(edge lines (len(edges),), short lines (len(short),))``, line numbers ``0 ..
         lines - 1`` (-1: a short piece on no edge's line).
     """
@@ -182,8 +178,7 @@ def group_lines(edges: list[Points], lines: ChiefLines, pose: npt.NDArray[np.flo
         # do not; and their pieces lie side by side along it (a line is seen once a frame).
         if a != b and frames[usable[int(i)]] == frames[usable[int(j)]] and _joins(
                 edge_dirs[usable[int(i)]], edge_dirs[usable[int(j)]], f_px,
-                PIECE_FRACTION, limit, own=True) and _one_line(
-                members[a], members[b], f_px, limit):
+                PIECE_FRACTION, own=True) and _one_line(members[a], members[b], f_px):
             parent[a] = b
             members[b] = members[b] + members.pop(a)
     roots = np.array([_find(parent, k) for k in range(len(edges))], dtype=np.int64)
@@ -200,7 +195,7 @@ def group_lines(edges: list[Points], lines: ChiefLines, pose: npt.NDArray[np.flo
         near = [usable[int(i)] for i in np.flatnonzero(normals @ n > cos_limit)]
         frame = frame_of(short[k])
         fits = {int(on_edges[e]) for e in near
-                if frames[e] == frame and _joins(edge_dirs[e], d, f_px, 0.0, limit)
+                if frames[e] == frame and _joins(edge_dirs[e], d, f_px, 0.0)
                 and _side_by_side(members[_find(parent, e)], [d], f_px)}
         if len(fits) == 1:
             on_short[k] = fits.pop()
