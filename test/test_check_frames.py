@@ -13,14 +13,19 @@ benchmarks/check_real_frames.py (docs/design.md section 2.17).
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 from check_scenes import as_sent, box_room, grid, half_size, KINDS, Lens, PIXEL_MM
+import cv2
 from mechdeconv_ros.imaging import plumb_check as pc
 from mechdeconv_ros.imaging.remap import build_float_maps, Rectifier
 from mechdeconv_ros.imaging.straight_edges import grey
 from mechdeconv_ros.model.model import build_model
+from mechdeconv_ros.tools.cli import main
 import numpy as np
 import pytest
-from test_check import MAX_RMS_PX, OFFSET_PX, values
+from test_check import MAX_RMS_PX, OFFSET_PX, REPO, values
 
 OFF = OFFSET_PX['fisheye']
 
@@ -89,3 +94,17 @@ def test_the_nodes_route_reads_them_too(frames: list, models: dict, kind: str) -
         chains += pc.chains_from_corrected(corrected, map_x, map_y)
     result = pc.check_chains(model, chains, MAX_RMS_PX)
     assert result.verdict == 'ok', (kind, result.as_dict())
+
+
+def test_cli_reads_a_twelve_bit_png(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    # mechdeconv check reads 16-bit PNGs unchanged: a 12-bit room (values to 4095) of the
+    # full-size sensor against config/fisheye.yaml (the axis centred, 16 and 12 px off).
+    lens = Lens('fisheye')
+    path = tmp_path / 'room12.png'
+    cv2.imwrite(str(path), as_sent(box_room(lens, OFF), 'mono16_12bit'))
+    assert main(['check', '--params', str(REPO / 'config/fisheye.yaml'), '--json',
+                 str(path)]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out['verdict'] == 'description_off', out
+    assert out['edges'] >= 10
+    assert abs(out['estimate']['sensor.axis_offset_x_mm']['value'] / PIXEL_MM - OFF[0]) <= 4.0
