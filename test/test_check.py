@@ -36,8 +36,9 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 CONFIGS = {'wide': 'config/wide_angle.yaml', 'fisheye': 'config/fisheye.yaml'}
 OFFSET_PX = {'wide': (20.0, -15.0), 'fisheye': (16.0, 12.0)}
-#: The rendering floor of the straightness, px (measured 0.054 and 0.086 on these frames).
-FLOOR_PX = 0.10
+#: The rendering floor of the straightness, px (whole lines, issue 36: measured 0.076 and
+#: 0.100 on these frames; edge by edge it was 0.054 and 0.086).
+FLOOR_PX = 0.12
 MAX_RMS_PX = 0.3
 
 
@@ -92,20 +93,18 @@ def test_the_nominal_description_is_off_and_the_offset_is_found(scene: dict) -> 
     assert result.straightness_rms_px_after < result.straightness_rms_px
 
 
-def test_a_tilt_the_lines_cannot_see_gets_a_large_sigma(scene: dict) -> None:
-    # A homography keeps lines straight: these scenes do not pin a 0.2 deg tilt down, and
-    # the estimate says so instead of reporting a confident value: a sigma above the
-    # tolerance that the edges measured (not the cap of pc.SIGMA_CAP tolerances), the
-    # value held at the description's, and check.apply leaves it alone.
+def test_the_tilts_are_judged_and_apply_sets_what_is_seen(scene: dict) -> None:
+    # Whole lines across the field see a 0.2 deg tilt (issue 36; edge by edge they did not):
+    # each tilt is seen and consistent with the truth (0), or held at the description with
+    # a sigma the edges measured (not the cap of pc.SIGMA_CAP tolerances) and never applied.
     result = check_chains(scene['nominal'], scene['chains'], MAX_RMS_PX)
+    applied = to_apply(result, scene['nominal'].values)
     for name in ('sensor.tilt_x_deg', 'sensor.tilt_y_deg'):
         est = result.estimate[name]
-        assert est['tolerance'] < est['sigma'] < 20.0 * est['tolerance'], (name, est)
-        assert est['value'] == scene['nominal'].values[name]
+        assert_seen_or_held(est, 0.0, scene['nominal'].values[name], name)
+        assert (name in applied) == (est['sigma'] <= est['tolerance'])
     # What apply sets: the offsets, which the edges see, at the truth within 2 px.
-    applied = to_apply(result, scene['nominal'].values)
     assert {'sensor.axis_offset_x_mm', 'sensor.axis_offset_y_mm'} <= set(applied)
-    assert not {'sensor.tilt_x_deg', 'sensor.tilt_y_deg'} & set(applied)
     for axis, name in enumerate(('sensor.axis_offset_x_mm', 'sensor.axis_offset_y_mm')):
         assert abs(applied[name] / PIXEL_MM - OFFSET_PX[scene['name']][axis]) <= 2.0, name
 

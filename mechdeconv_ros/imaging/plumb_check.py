@@ -344,13 +344,15 @@ def check_chains(model: Any, chains: list[Points], max_rms_px: float,
     """
     lines = ChiefLines.from_model(model)
     pose0 = nominal_pose(model)
-    pieces, short = line_pieces(chains, lines, pose0, output_focal_px(model))
-    edges = _fit_points(pieces)
+    # The fit and the straightness are of whole scene lines, grouped once under the
+    # description (the membership does not change with the pose): each point's residual is
+    # from its whole line's great circle.
+    fits, full, per_line = _scene_lines(model, lines, chains, pose0)
     result = CheckResult()
     tol = tolerances(model)
     free = np.flatnonzero(tol > 0.0) if estimate else np.zeros(0, dtype=np.int64)
-    problem = _Problem(lines, edges, pose0, free)
-    enough = problem.count >= MIN_EDGES
+    problem = _Problem(lines, fits, pose0, free)
+    enough = int(per_line.sum()) >= MIN_EDGES
     x = pose0[free]
     if enough and free.size:
         scale = tol[free]
@@ -367,20 +369,18 @@ def check_chains(model: Any, chains: list[Points], max_rms_px: float,
             x = _levenberg_marquardt(problem, x, lo, hi, scale)
     elif enough:
         problem.keep_straight(x)
-    result.edges = problem.count
+    result.edges = int(per_line[problem.ids].sum()) if problem.count else 0
+    result.lines = problem.count
     result.points = int(problem.points.shape[0])
-    result.rejected_edges = len(edges) - problem.count
+    result.rejected_edges = int(per_line.sum()) - result.edges
     result.field_coverage = field_coverage(lines, pose0, problem.points)
     if problem.count == 0:
         return result
-    # Whole scene lines, grouped once under the description (the membership does not
-    # change with the pose): the straightness is each point's distance from its whole line,
-    # over every point of the edges the fit kept and of the short pieces on their lines.
-    whole = _WholeLines(model, lines, [pieces[k] for k in problem.ids], short, pose0)
-    result.lines = whole.count
+    # The straightness: every point of the kept lines (their edges and short pieces).
+    whole = _WholeLines(model, lines, [full[k] for k in problem.ids])
     rms, worst = whole.straightness(pose0)
     result.straightness_rms_px, result.straightness_max_px = rms, worst
-    if problem.count < MIN_EDGES or result.field_coverage < MIN_COVERAGE:
+    if result.edges < MIN_EDGES or result.field_coverage < MIN_COVERAGE:
         return result
     result.verdict = 'description_off' if not rms <= max_rms_px else 'ok'
     if free.size == 0:
@@ -443,18 +443,13 @@ def _bases(model: Any, free: npt.NDArray[np.int64], base_d: float) -> list[float
 
 
 class _WholeLines:
-    """The points of whole scene lines: straight edges and the short pieces on their lines."""
+    """The points of whole scene lines (their straight edges and short pieces), one label each."""
 
-    def __init__(self, model: Any, lines: ChiefLines, edges: list[Points], short: list[Points],
-                 pose0: npt.NDArray[np.float64]):
+    def __init__(self, model: Any, lines: ChiefLines, parts: list[Points]):
         self.model, self.lines = model, lines
-        on_edges, on_short = group_lines(edges, lines, pose0, output_focal_px(model), short)
-        joined = [k for k in range(len(short)) if on_short[k] >= 0]
-        parts = list(edges) + [short[k] for k in joined]
         self.points = np.concatenate(parts) if parts else np.zeros((0, 2))
-        labels = np.concatenate([on_edges, on_short[joined]]).astype(np.int64)
-        self.line = np.repeat(labels, [p.shape[0] for p in parts])
-        self.count = int(on_edges.max()) + 1 if on_edges.size else 0
+        self.line = np.repeat(np.arange(len(parts)), [p.shape[0] for p in parts])
+        self.count = len(parts)
 
     def straightness(self, pose: npt.NDArray[np.float64]) -> tuple[float, float]:
         """Return the RMS and largest distance from the whole lines under a pose, px."""
@@ -462,6 +457,34 @@ class _WholeLines:
         good = np.all(np.isfinite(dirs), axis=1)
         rms, worst, _ = straightness_px(self.model, dirs[good], self.line[good], self.count)
         return rms, worst
+
+
+def _scene_lines(model: Any, lines: ChiefLines, chains: list[Points],
+                 pose0: npt.NDArray[np.float64]
+                 ) -> tuple[list[Points], list[Points], npt.NDArray[np.int64]]:
+    """
+    Return each scene line's fit points, all its points, and its count of straight edges.
+
+    :param model: the description.
+    :param lines: its inverse.
+    :param chains: raw chains.
+    :param pose0: the description's pose (the pieces and lines are made under it).
+    :return: ``(fit points per line (edges thinned), all points per line (edges and short
+        pieces), edges per line)``.
+    """
+    f_px = output_focal_px(model)
+    pieces, short = line_pieces(chains, lines, pose0, f_px)
+    if not pieces:
+        return [], [], np.zeros(0, dtype=np.int64)
+    on_edges, on_short = group_lines(pieces, lines, pose0, f_px, short)
+    fit = _fit_points(pieces)
+    count = int(on_edges.max()) + 1
+    members = [np.flatnonzero(on_edges == k) for k in range(count)]
+    fits = [np.concatenate([fit[j] for j in m]) for m in members]
+    full = [np.concatenate([pieces[j] for j in m]
+                           + [short[j] for j in np.flatnonzero(on_short == k)])
+            for k, m in enumerate(members)]
+    return fits, full, np.bincount(on_edges, minlength=count)
 
 
 def check_images(model: Any, images: list[np.ndarray], max_rms_px: float,
