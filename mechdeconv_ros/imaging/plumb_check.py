@@ -11,21 +11,23 @@ a camera as assembled adds are a few unknowns: where the axis meets the sensor
 parameter the schema does not have) holds it fixed.
 
 Estimate: the pose ``p`` minimises ``sum_i r_i(p)^2`` over the points ``i`` of the straight
-edges ``e``, ``r_i`` the raw px distance of point i from the image of its edge's great circle
-to first order: ``r_i = n_e . d_i / hypot(n_theta / rho', n_phi sin(theta) / rho)`` (``d_i``
-the direction of point i under p, ``n_e`` the normal of the edge's best great circle, refitted
+edges, grouped into whole scene lines ``e`` (:mod:`~mechdeconv_ros.imaging.scene_lines`, once,
+under the description), ``r_i`` the raw px distance of point i from the image of its line's
+great circle to first order: ``r_i = n_e . d_i / hypot(n_theta / rho', n_phi sin(theta) /
+rho)`` (``d_i`` the direction of point i under p, ``n_e`` the normal of the line's best great
+circle, refitted
 at every p: variable projection; ``n_theta``, ``n_phi`` its components along the field angle
 and the azimuth at ``d_i``; ``rho'``, ``rho / sin(theta)`` the radial and tangential raw px
 per rad under p). Every factor is taken at the pose being judged: a scale fixed at the
 description let a larger image distance shrink the edges' raw noise in angle, and so pulled
 the estimate there (docs/design.md section 2.17). By Levenberg-Marquardt with forward-
 difference Jacobians, each parameter kept within ``BOUND_SIGMAS`` tolerances of the
-description. Edges that stay curved after the fit (circles, arcs: RMS over
+description. Lines that stay curved after the fit (circles, arcs: RMS over
 ``REJECT_FACTOR`` x the median and ``REJECT_FLOOR_PX``) are dropped and the fit is redone.
 
-Uncertainty: the larger of the classical ``s^2 (J^T J)^-1`` and the edge-clustered sandwich
+Uncertainty: the larger of the classical ``s^2 (J^T J)^-1`` and the line-clustered sandwich
 ``(J^T J)^-1 (sum_e g_e g_e^T) (J^T J)^-1`` (``g_e = J_e^T r_e``), which does not believe
-that the points along one edge err independently, plus in quadrature a systematic floor
+that the points along one line err independently, plus in quadrature a systematic floor
 ``eps^2 N [(J^T J)^-1]_kk`` with ``eps = SYSTEMATIC_FRACTION s`` (N points, s their RMS
 residual): the largest move a straightness error of ``eps`` px RMS can fake, aligned with the
 parameter's own signature. So a move counts only when it straightens the edges by more than
