@@ -146,17 +146,23 @@ def _crossing_number(ridge: npt.NDArray[np.uint8]) -> npt.NDArray[np.int32]:
 def _corners(ridge: npt.NDArray[np.uint8], gx: np.ndarray, gy: np.ndarray
              ) -> npt.NDArray[np.bool_]:
     """Return the ridge pixels whose gradient turns by over ``CORNER_DEG`` to a neighbour."""
-    mag = np.maximum(np.hypot(gx, gy), 1e-9)
-    on = ridge > 0
-    ux = np.where(on, gx / mag, 0.0)
-    uy = np.where(on, gy / mag, 0.0)
     h, w = ridge.shape
-    px, py, pon = np.pad(ux, 1), np.pad(uy, 1), np.pad(on, 1)
-    limit = math.cos(math.radians(CORNER_DEG))
+    rows, cols = np.nonzero(ridge)
     out = np.zeros((h, w), dtype=bool)
-    for r, c in ((0, 0), (0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1), (2, 2)):
-        dot = ux * px[r:r + h, c:c + w] + uy * py[r:r + h, c:c + w]
-        out |= on & pon[r:r + h, c:c + w] & (dot < limit)
+    if rows.size == 0:
+        return out
+    mag = np.maximum(np.hypot(gx[rows, cols], gy[rows, cols]), 1e-9)
+    ux, uy = gx[rows, cols] / mag, gy[rows, cols] / mag
+    # The unit gradient of every ridge pixel, 0 elsewhere (only ridge pixels are read).
+    field = np.zeros((h + 2, w + 2, 2), dtype=np.float32)
+    field[rows + 1, cols + 1, 0], field[rows + 1, cols + 1, 1] = ux, uy
+    limit = math.cos(math.radians(CORNER_DEG))
+    corner = np.zeros(rows.size, dtype=bool)
+    for dr, dc in ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)):
+        near = field[rows + 1 + dr, cols + 1 + dc]
+        on = (near[:, 0] != 0.0) | (near[:, 1] != 0.0)
+        corner |= on & (ux * near[:, 0] + uy * near[:, 1] < limit)
+    out[rows[corner], cols[corner]] = True
     return out
 
 
