@@ -24,6 +24,13 @@ plane at any orientation, a box room (six walls of different greys with dark doo
 windows), and discs (circles) on a plane. Edges are anti-aliased analytically (the box
 filter of the pixel: a linear ramp one footprint wide) and wall-to-wall edges by 4 x 4
 supersampling; then a Gaussian blur of ``BLUR_PX`` (the optics) and 8-bit quantisation.
+
+Ground truth for the straightness (issue 36): :func:`grid_lines` and :func:`room_lines` give
+the scene lines the renderer draws (end directions of each arc of a great circle),
+:func:`assign_to_lines` gives each detected edge point its known line through the renderer's
+own geometry, and :func:`whole_line_rms` measures the RMS distance from whole known lines.
+:func:`as_sent` turns a render into what a real camera sends (JPEG, Bayer, motion blur,
+10/12-bit ``mono16``, dim).
 """
 
 from __future__ import annotations

@@ -11,9 +11,9 @@ with the nominal (centred) one. A box room seen by a sensor both off the axis an
 ``TILT_DEG`` (optiland's chief-ray lines: test/data/optiland_chief_slopes.json) is checked
 the same way; the renderer's tilted sensor is tied to the package's ``project`` first.
 
-Measured (docs/design.md section 2.17): the floor is 0.054 px RMS (wide-angle, pinhole
-output) and 0.086 px (fisheye, equidistant output, px at its centre scale); the renders are
-deterministic (fixed noise seed) and ``FLOOR_PX`` bounds both.
+Measured (docs/design.md section 2.17): the floor of whole lines is 0.077 px RMS (wide-angle,
+pinhole output) and 0.100 px (fisheye, equidistant output, px at its centre scale); the
+renders are deterministic (fixed noise seed) and ``FLOOR_PX`` bounds both.
 """
 
 from __future__ import annotations

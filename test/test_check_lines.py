@@ -17,7 +17,7 @@ from __future__ import annotations
 from check_scenes import assign_to_lines, box_room, grid, grid_lines, Lens, room_lines
 from check_scenes import whole_line_rms
 from mechdeconv_ros.imaging.plumb_check import check_chains
-from mechdeconv_ros.imaging.straight_edges import detect_chains
+from mechdeconv_ros.imaging.straight_edges import detect_chains, frame_of, tagged
 from mechdeconv_ros.model.model import build_model
 import numpy as np
 import pytest
@@ -78,3 +78,18 @@ def test_the_true_description_reads_the_floor(scene: dict) -> None:
     # Each line is one group: as many lines as the truth has lines with points.
     known = len(np.unique(scene['label'][scene['label'] >= 0]))
     assert 0.75 * known <= result.lines <= known
+
+
+def test_lines_are_grouped_within_a_frame(scene: dict) -> None:
+    # Every chain of its own frame (the node's window of a moving camera): only pieces of
+    # one chain join, so the same edges make more lines than with the frame known.
+    model = build_model(values('fisheye', OFF))
+    alone = [tagged(np.asarray(c), 1000 + k) for k, c in enumerate(scene['chains'])]
+    assert all(frame_of(c) == 1000 + k for k, c in enumerate(alone))
+    apart = check_chains(model, alone, MAX_RMS_PX)
+    together = scene['true'][1]
+    assert apart.edges == together.edges
+    if scene['kind'] == 'grid':     # bars crossed by bars: a line of several chains
+        assert apart.lines > together.lines
+    else:                           # the room's lines: one chain each
+        assert apart.lines == together.lines
