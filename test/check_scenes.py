@@ -24,6 +24,13 @@ plane at any orientation, a box room (six walls of different greys with dark doo
 windows), and discs (circles) on a plane. Edges are anti-aliased analytically (the box
 filter of the pixel: a linear ramp one footprint wide) and wall-to-wall edges by 4 x 4
 supersampling; then a Gaussian blur of ``BLUR_PX`` (the optics) and 8-bit quantisation.
+
+Ground truth for the straightness (issue 36): :func:`grid_lines` and :func:`room_lines` give
+the scene lines the renderer draws (end directions of each arc of a great circle),
+:func:`assign_to_lines` gives each detected edge point its known line through the renderer's
+own geometry, and :func:`whole_line_rms` measures the RMS distance from whole known lines.
+:func:`as_sent` turns a render into what a real camera sends (JPEG, Bayer, motion blur,
+10/12-bit ``mono16``, dim).
 """
 
 from __future__ import annotations
@@ -308,3 +315,184 @@ def _finish(img: np.ndarray, d: np.ndarray) -> np.ndarray:
     rng = np.random.default_rng(7)
     img = img + 0.5 * rng.standard_normal(img.shape)
     return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+
+
+# The scene lines the renderer draws, as arcs of great circles (ground truth for the
+# straightness): each line is its two end directions in the camera's optical frame.
+
+def grid_lines(yaw: float, pitch: float, roll: float,
+               half_width: float = 0.08) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Return the bar edges and the border of :func:`grid`'s plane as (start, end) directions."""
+    rot = _rot(yaw, pitch, roll)
+    limit, period = 2.2, 0.55
+    coords = [k * period + sign * half_width for k in range(-4, 5) for sign in (-1.0, 1.0)]
+    coords = [c for c in coords if abs(c) < limit] + [-limit, limit]
+    lines = []
+    for c in coords:
+        for swap in (False, True):
+            ends = [(c, t) if not swap else (t, c) for t in (-limit, limit)]
+            lines.append(tuple(rot @ np.array([s, t, 1.0]) for s, t in ends))
+    return [(a / np.linalg.norm(a), b / np.linalg.norm(b)) for a, b in lines]
+
+
+def room_lines(yaw: float = 20.0, pitch: float = -8.0) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Return the box room's wall-to-wall edges and its doors' edges (:func:`box_room`)."""
+    rot = _rot(yaw, pitch)
+    lo = np.array([-2.0, -1.3, -3.0])
+    hi = np.array([2.6, 1.1, 3.5])
+    segments = []
+    for axis in range(3):
+        a, b = [k for k in range(3) if k != axis]
+        for va in (lo[a], hi[a]):
+            for vb in (lo[b], hi[b]):
+                p, q = np.zeros(3), np.zeros(3)
+                p[a], p[b], q[a], q[b] = va, vb, va, vb
+                p[axis], q[axis] = lo[axis], hi[axis]
+                segments.append((p, q))
+        for bound in (lo[axis], hi[axis]):
+            # The door of this wall: |p0 - 0.3| < 0.6, |p1 + 0.2| < 0.5 (_room_sample).
+            e0 = (-0.3, 0.9)
+            e1 = (-0.7, 0.3)
+            corners = [(e0[0], e1[0]), (e0[1], e1[0]), (e0[1], e1[1]), (e0[0], e1[1])]
+            for k in range(4):
+                p, q = np.zeros(3), np.zeros(3)
+                p[axis] = q[axis] = bound
+                (p[a], p[b]), (q[a], q[b]) = corners[k], corners[(k + 1) % 4]
+                segments.append((p, q))
+    # Room coordinates are rot @ (camera direction): a camera direction is rot^T @ room.
+    out = []
+    for p, q in segments:
+        dp, dq = rot.T @ p, rot.T @ q
+        out.append((dp / np.linalg.norm(dp), dq / np.linalg.norm(dq)))
+    return out
+
+
+def raw_pixels(lens: Lens, dirs: np.ndarray, offset_px: tuple[float, float]) -> np.ndarray:
+    """Return the raw pixel (u, v) of each direction (untilted sensor); NaN outside the field."""
+    theta = np.arccos(np.clip(dirs[..., 2], -1.0, 1.0))
+    rho = np.interp(theta, lens.theta, lens.h, right=np.nan) / PIXEL_MM
+    phi = np.arctan2(dirs[..., 1], dirs[..., 0])
+    return np.stack([(lens.width - 1) / 2.0 + offset_px[0] + rho * np.cos(phi),
+                     (lens.height - 1) / 2.0 + offset_px[1] + rho * np.sin(phi)], axis=-1)
+
+
+def assign_to_lines(lens: Lens, offset_px: tuple[float, float], points: np.ndarray,
+                    lines: list[tuple[np.ndarray, np.ndarray]], tol_px: float = 1.0,
+                    clear_px: float = 3.0) -> np.ndarray:
+    """
+    Return the known line each raw edge point lies on (-1: none, or two lines are near).
+
+    A point belongs to line L when its true direction lies within L's arc and its raw px
+    distance from L's image (the foot on the great circle, carried back to raw px) is under
+    ``tol_px``, and no other line's image is within ``clear_px``.
+
+    :param lens: the renderer's lens.
+    :param offset_px: the true axis offset.
+    :param points: ``(N, 2)`` raw points.
+    :param lines: (start, end) directions.
+    :return: ``(N,)`` line numbers.
+    """
+    d = lens.directions(points[:, 0], points[:, 1], offset_px)
+    dist = np.full((points.shape[0], len(lines)), np.inf)
+    for k, (a, b) in enumerate(lines):
+        n = np.cross(a, b)
+        n /= np.linalg.norm(n)
+        along = (np.cross(a, d) @ n >= 0.0) & (np.cross(d, b) @ n >= 0.0)
+        foot = d - (d @ n)[:, None] * n
+        foot /= np.linalg.norm(foot, axis=1, keepdims=True)
+        gap = np.hypot(*(raw_pixels(lens, foot, offset_px) - points).T)
+        dist[:, k] = np.where(along & np.isfinite(gap), gap, np.inf)
+    order = np.argsort(dist, axis=1)
+    best = np.take_along_axis(dist, order[:, :1], axis=1)[:, 0]
+    second = (np.take_along_axis(dist, order[:, 1:2], axis=1)[:, 0] if len(lines) > 1
+              else np.full(best.shape, np.inf))
+    return np.where((best < tol_px) & (second > clear_px), order[:, 0], -1)
+
+
+def whole_line_rms(model: object, points: np.ndarray, line: np.ndarray,
+                   min_points: int = 24) -> float:
+    """
+    Return the RMS distance of points from their whole known line, px of the corrected image.
+
+    The measure of docs/design.md section 2.17 with the grouping known: a pinhole output
+    fits each line's corrected pixels a total-least-squares line; an equidistant one takes
+    the angle from each line's best great circle times the output focal length. Written
+    here from those words (the package's :func:`directions_of` only carries the points).
+
+    :param model: the description under test.
+    :param points: ``(N, 2)`` raw edge points.
+    :param line: ``(N,)`` their line numbers (-1: none).
+    :param min_points: lines with fewer points are left out.
+    :return: RMS px.
+    """
+    from mechdeconv_ros.model.projection import directions_of
+    dirs = directions_of(model, points)
+    k = model.K_new
+    f = float(np.sqrt(k[0, 0] * k[1, 1]))
+    squares = []
+    for label in np.unique(line[line >= 0]):
+        d = dirs[(line == label) & np.all(np.isfinite(dirs), axis=1)]
+        if model.projection == 'pinhole':
+            d = d[d[:, 2] > 0.02]
+            xy = np.stack([k[0, 0] * d[:, 0] / d[:, 2] + k[0, 2],
+                           k[1, 1] * d[:, 1] / d[:, 2] + k[1, 2]], axis=1)
+            xy = xy[(xy[:, 0] >= 0) & (xy[:, 1] >= 0) & (xy[:, 0] <= model.out_width - 1)
+                    & (xy[:, 1] <= model.out_height - 1)]
+            if xy.shape[0] < min_points:
+                continue
+            centred = xy - xy.mean(axis=0)
+            normal = np.linalg.svd(centred, full_matrices=False)[2][-1]
+            squares.append((centred @ normal) ** 2)
+        else:
+            if d.shape[0] < min_points:
+                continue
+            normal = np.linalg.eigh(d.T @ d)[1][:, 0]
+            squares.append((d @ normal * f) ** 2)
+    return float(np.sqrt(np.mean(np.concatenate(squares)))) if squares else float('nan')
+
+
+#: The kinds of frame a real camera sends (:func:`as_sent`).
+KINDS = ('jpeg80', 'bayer', 'motion3', 'mono16_10bit', 'mono16_12bit', 'dim20')
+
+
+def half_size(frame: np.ndarray) -> np.ndarray:
+    """Return a frame at half the size (2 x 2 pixel means: a sensor of twice the pitch)."""
+    h, w = frame.shape[:2]
+    return cv2.resize(frame, (w // 2, h // 2), interpolation=cv2.INTER_AREA)
+
+
+def as_sent(frame: np.ndarray, kind: str, seed: int = 0) -> np.ndarray:
+    """
+    Return an 8-bit grey render as a real camera would send it.
+
+    ``jpeg80``: JPEG at quality 80, decoded; ``bayer``: a tinted colour frame (R 0.9, B 0.7
+    of the grey) mosaicked RGGB and demosaiced by OpenCV (BGR); ``motion3``: a 3 px
+    horizontal box blur; ``mono16_10bit`` and ``mono16_12bit``: uint16 up to 1023 and
+    4095 with the sensor's own noise (1 LSB); ``dim20``: scaled to a mean of 20 grey levels,
+    noise 0.5 level, 8 bits.
+    """
+    rng = np.random.default_rng(seed)
+    grey = frame.astype(np.float64)
+    if kind == 'jpeg80':
+        ok, data = cv2.imencode('.jpg', frame, [cv2.IMWRITE_JPEG_QUALITY, 80])
+        return cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    if kind == 'bayer':
+        bgr = np.stack([0.7 * grey, grey, 0.9 * grey], axis=-1)
+        mosaic = np.empty(grey.shape)
+        mosaic[0::2, 0::2] = bgr[0::2, 0::2, 2]
+        mosaic[0::2, 1::2] = bgr[0::2, 1::2, 1]
+        mosaic[1::2, 0::2] = bgr[1::2, 0::2, 1]
+        mosaic[1::2, 1::2] = bgr[1::2, 1::2, 0]
+        raw = np.clip(np.rint(mosaic), 0, 255).astype(np.uint8)
+        return cv2.cvtColor(raw, cv2.COLOR_BayerRG2BGR)
+    if kind == 'motion3':
+        return cv2.blur(frame, (3, 1))
+    if kind in ('mono16_10bit', 'mono16_12bit'):
+        top = 1023.0 if kind == 'mono16_10bit' else 4095.0
+        value = grey * top / 255.0 + rng.standard_normal(grey.shape)
+        return np.clip(np.rint(value), 0, top).astype(np.uint16)
+    if kind == 'dim20':
+        value = grey * 20.0 / max(float(grey.mean()), 1e-9)
+        value += 0.5 * rng.standard_normal(grey.shape)
+        return np.clip(np.rint(value), 0, 255).astype(np.uint8)
+    raise ValueError(f'unknown kind {kind}')

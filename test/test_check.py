@@ -11,9 +11,9 @@ with the nominal (centred) one. A box room seen by a sensor both off the axis an
 ``TILT_DEG`` (optiland's chief-ray lines: test/data/optiland_chief_slopes.json) is checked
 the same way; the renderer's tilted sensor is tied to the package's ``project`` first.
 
-Measured (docs/design.md section 2.17): the floor is 0.054 px RMS (wide-angle, pinhole
-output) and 0.086 px (fisheye, equidistant output, px at its centre scale); the renders are
-deterministic (fixed noise seed) and ``FLOOR_PX`` bounds both.
+Measured (docs/design.md section 2.17): the floor of whole lines is 0.077 px RMS (wide-angle,
+pinhole output) and 0.100 px (fisheye, equidistant output, px at its centre scale); the
+renders are deterministic (fixed noise seed) and ``FLOOR_PX`` bounds both.
 """
 
 from __future__ import annotations
@@ -36,8 +36,9 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 CONFIGS = {'wide': 'config/wide_angle.yaml', 'fisheye': 'config/fisheye.yaml'}
 OFFSET_PX = {'wide': (20.0, -15.0), 'fisheye': (16.0, 12.0)}
-#: The rendering floor of the straightness, px (measured 0.054 and 0.086 on these frames).
-FLOOR_PX = 0.10
+#: The rendering floor of the straightness, px (whole lines, issue 36: measured 0.076 and
+#: 0.100 on these frames; edge by edge it was 0.054 and 0.086).
+FLOOR_PX = 0.12
 MAX_RMS_PX = 0.3
 
 
@@ -68,10 +69,16 @@ def test_the_true_description_is_ok_at_the_floor(scene: dict) -> None:
     assert result.edges >= 30
     assert result.field_coverage > 0.5
     assert result.straightness_rms_px < FLOOR_PX
-    # Each estimate agrees with the truth within one tolerance (no false alarm).
+    # Each estimate agrees with the truth within one tolerance (no false alarm); the truth
+    # of the image distance is the description's own sensor plane.
     for name, est in result.estimate.items():
-        truth = scene['true'].values[name] if name.startswith('sensor.') else est['value']
+        truth = (scene['true'].values[name] if name.startswith('sensor.')
+                 else pc.image_distance_base(scene['true']))
         assert abs(est['value'] - truth) <= max(3.0 * est['sigma'], est['tolerance']), name
+    distance = result.estimate['lens.image_distance_mm']
+    assert distance['sigma'] <= distance['tolerance']
+    assert abs(distance['value'] - pc.image_distance_base(scene['true'])) < 0.5 * distance[
+        'tolerance']
 
 
 def test_the_nominal_description_is_off_and_the_offset_is_found(scene: dict) -> None:
@@ -86,16 +93,20 @@ def test_the_nominal_description_is_off_and_the_offset_is_found(scene: dict) -> 
     assert result.straightness_rms_px_after < result.straightness_rms_px
 
 
-def test_a_tilt_the_lines_cannot_see_gets_a_large_sigma(scene: dict) -> None:
-    # A homography keeps lines straight: these scenes do not pin a 0.2 deg tilt down, and
-    # the estimate says so instead of reporting a confident value.
+def test_the_tilts_are_judged_and_apply_sets_what_is_seen(scene: dict) -> None:
+    # Whole lines across the field see a 0.2 deg tilt (issue 36; edge by edge they did not):
+    # each tilt is seen and consistent with the truth (0), or held at the description with
+    # a sigma the edges measured (not the cap of pc.SIGMA_CAP tolerances) and never applied.
     result = check_chains(scene['nominal'], scene['chains'], MAX_RMS_PX)
-    sigmas = [result.estimate[n]['sigma'] for n in ('sensor.tilt_x_deg', 'sensor.tilt_y_deg')]
-    assert max(sigmas) > result.estimate['sensor.tilt_x_deg']['tolerance']
-    assert to_apply(result, scene['nominal'].values).keys() <= {
-        'sensor.axis_offset_x_mm', 'sensor.axis_offset_y_mm'} | {
-        n for n in result.estimate if result.estimate[n]['sigma']
-        <= result.estimate[n]['tolerance']}
+    applied = to_apply(result, scene['nominal'].values)
+    for name in ('sensor.tilt_x_deg', 'sensor.tilt_y_deg'):
+        est = result.estimate[name]
+        assert_seen_or_held(est, 0.0, scene['nominal'].values[name], name)
+        assert (name in applied) == (est['sigma'] <= est['tolerance'])
+    # What apply sets: the offsets, which the edges see, at the truth within 2 px.
+    assert {'sensor.axis_offset_x_mm', 'sensor.axis_offset_y_mm'} <= set(applied)
+    for axis, name in enumerate(('sensor.axis_offset_x_mm', 'sensor.axis_offset_y_mm')):
+        assert abs(applied[name] / PIXEL_MM - OFFSET_PX[scene['name']][axis]) <= 2.0, name
 
 
 def test_circles_do_not_move_the_estimate(scene: dict) -> None:
@@ -141,19 +152,27 @@ def test_the_corrected_frame_route_agrees(scene: dict) -> None:
     assert nominal.edges < check_chains(scene['nominal'], scene['chains'], MAX_RMS_PX).edges
 
 
-def test_to_apply_stays_within_the_tolerances() -> None:
+@pytest.mark.parametrize('value, expected', [(0.5, 0.06), (-0.5, -0.06), (0.013, 0.013)],
+                         ids=['clipped-high', 'clipped-low', 'inside'])
+def test_to_apply_stays_within_the_tolerances(value: float, expected: float) -> None:
+    # Literal cases, not the rule restated: 3 tolerances of 0.02 mm about 0 are 0.06 mm; a
+    # tilt the edges do not see (sigma 3 of 0.2) and an automatic image distance (0) stay.
     result = CheckResult(verdict='description_off', estimate={
-        'sensor.axis_offset_x_mm': {'value': 0.5, 'sigma': 0.001, 'tolerance': 0.02},
+        'sensor.axis_offset_x_mm': {'value': value, 'sigma': 0.001, 'tolerance': 0.02},
         'sensor.tilt_x_deg': {'value': 0.1, 'sigma': 3.0, 'tolerance': 0.2},
         'lens.image_distance_mm': {'value': 4.2, 'sigma': 0.001, 'tolerance': 0.01}})
     current = {'sensor.axis_offset_x_mm': 0.0, 'sensor.tilt_x_deg': 0.0,
                'lens.image_distance_mm': 0.0}
-    out = to_apply(result, current)
-    assert out == {'sensor.axis_offset_x_mm': pytest.approx(0.06)}
+    assert to_apply(result, current) == {'sensor.axis_offset_x_mm': pytest.approx(expected)}
+    # A set image distance is applied (within its bounds: 4.17 +- 0.03 mm).
+    out = to_apply(result, {**current, 'lens.image_distance_mm': 4.17})
+    assert out['lens.image_distance_mm'] == pytest.approx(4.2)
+    out = to_apply(result, {**current, 'lens.image_distance_mm': 4.0})
+    assert out['lens.image_distance_mm'] == pytest.approx(4.03)
     # Bounds about the start-up values, not the current ones.
     out = to_apply(result, {**current, 'sensor.axis_offset_x_mm': 0.06},
                    {'sensor.axis_offset_x_mm': 0.0})
-    assert out == {'sensor.axis_offset_x_mm': pytest.approx(0.06)}
+    assert out == {'sensor.axis_offset_x_mm': pytest.approx(expected)}
     assert to_apply(CheckResult(verdict='ok', estimate=result.estimate), current) == {}
 
 
@@ -196,6 +215,21 @@ def tilted_values(name: str, offset_px: tuple[float, float],
     vals = values(name, offset_px)
     vals['sensor.tilt_x_deg'], vals['sensor.tilt_y_deg'] = tilt_deg
     return vals
+
+
+def assert_seen_or_held(est: dict, truth: float, description: float, key: str) -> None:
+    """
+    Assert an estimate is seen and right, or held at the description with a measured sigma.
+
+    Seen (sigma within the tolerance): within 3 sigma of the truth. Held (sigma above it):
+    the description's value exactly, and a sigma under 20 tolerances, far below the cap of
+    ``SIGMA_CAP`` (100): a large sigma alone does not pass (measured: 1 to 5 tolerances).
+    """
+    if est['sigma'] <= est['tolerance']:
+        assert abs(est['value'] - truth) <= 3.0 * est['sigma'], (key, est, truth)
+    else:
+        assert est['value'] == description, (key, est)
+        assert est['sigma'] < 20.0 * est['tolerance'], (key, est)
 
 
 def test_the_chief_slopes_reference_is_the_curves_lines() -> None:
@@ -261,7 +295,7 @@ def test_a_tilted_sensor_with_the_true_description_is_ok(tilted: dict) -> None:
              'sensor.axis_offset_y_mm': OFFSET_PX[name][1] * PIXEL_MM}
     for key, value in truth.items():
         est = result.estimate[key]
-        assert abs(est['value'] - value) <= max(3.0 * est['sigma'], est['tolerance']), key
+        assert_seen_or_held(est, value, value, key)
 
 
 def test_a_tilted_sensor_with_the_nominal_description(tilted: dict) -> None:
@@ -276,12 +310,11 @@ def test_a_tilted_sensor_with_the_nominal_description(tilted: dict) -> None:
         assert error_px <= max(abs(truth_px) / 4.0, 2.0), (key, error_px)
     for axis, key in enumerate(('sensor.tilt_x_deg', 'sensor.tilt_y_deg')):
         est = result.estimate[key]
-        # Consistent with the truth within 3 sigma, or (not seen by these edges) reported
-        # with its large sigma at the description's value, not a confident wrong value.
-        assert (abs(est['value'] - TILT_DEG[name][axis]) <= 3.0 * est['sigma']
-                or est['sigma'] > est['tolerance']), (key, est)
+        # Seen: within 3 sigma of the truth; not seen: held at the description's 0 with a
+        # sigma the edges measured, and never applied.
+        assert_seen_or_held(est, TILT_DEG[name][axis], 0.0, key)
         if est['sigma'] > est['tolerance']:
-            assert est['value'] == 0.0 and key not in to_apply(result, values(name))
+            assert key not in to_apply(result, values(name))
     # Within 1.5 x this scene's floor (the true description's straightness, measured here):
     # measured 0.030 of 0.033 px (wide-angle) and 0.055 of 0.054 px (fisheye).
     assert result.straightness_rms_px_after <= 1.5 * tilted['true'].straightness_rms_px
@@ -345,3 +378,12 @@ def test_white_edge_noise_does_not_move_the_image_distance() -> None:
     assert noiseless.verdict == 'ok'
     assert abs(noiseless.estimate['lens.image_distance_mm']['value']
                - pc.image_distance_base(model)) < 1e-4
+
+
+@pytest.mark.parametrize('before, after, off', [
+    (0.03, 0.025, False), (0.06, 0.049, False), (0.12, 0.09, True), (0.3, 0.1, True),
+    (0.5, 0.45, False)], ids=['floor-gain', 'small-bend', 'bend', 'large', 'no-ratio'])
+def test_the_ratio_rule_has_an_absolute_floor(before: float, after: float, off: bool) -> None:
+    # Item (e): 0.005 px gained on 0.03 px edges (a ratio of 1.2) is no bend anyone could
+    # see; the rule wants the ratio and a removed bend (in quadrature) over 0.05 px.
+    assert pc.straightens(before, after) is off

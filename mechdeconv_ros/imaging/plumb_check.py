@@ -11,21 +11,23 @@ a camera as assembled adds are a few unknowns: where the axis meets the sensor
 parameter the schema does not have) holds it fixed.
 
 Estimate: the pose ``p`` minimises ``sum_i r_i(p)^2`` over the points ``i`` of the straight
-edges ``e``, ``r_i`` the raw px distance of point i from the image of its edge's great circle
-to first order: ``r_i = n_e . d_i / hypot(n_theta / rho', n_phi sin(theta) / rho)`` (``d_i``
-the direction of point i under p, ``n_e`` the normal of the edge's best great circle, refitted
+edges, grouped into whole scene lines ``e`` (:mod:`~mechdeconv_ros.imaging.scene_lines`, once,
+under the description), ``r_i`` the raw px distance of point i from the image of its line's
+great circle to first order: ``r_i = n_e . d_i / hypot(n_theta / rho', n_phi sin(theta) /
+rho)`` (``d_i`` the direction of point i under p, ``n_e`` the normal of the line's best great
+circle, refitted
 at every p: variable projection; ``n_theta``, ``n_phi`` its components along the field angle
 and the azimuth at ``d_i``; ``rho'``, ``rho / sin(theta)`` the radial and tangential raw px
 per rad under p). Every factor is taken at the pose being judged: a scale fixed at the
 description let a larger image distance shrink the edges' raw noise in angle, and so pulled
 the estimate there (docs/design.md section 2.17). By Levenberg-Marquardt with forward-
 difference Jacobians, each parameter kept within ``BOUND_SIGMAS`` tolerances of the
-description. Edges that stay curved after the fit (circles, arcs: RMS over
+description. Lines that stay curved after the fit (circles, arcs: RMS over
 ``REJECT_FACTOR`` x the median and ``REJECT_FLOOR_PX``) are dropped and the fit is redone.
 
-Uncertainty: the larger of the classical ``s^2 (J^T J)^-1`` and the edge-clustered sandwich
+Uncertainty: the larger of the classical ``s^2 (J^T J)^-1`` and the line-clustered sandwich
 ``(J^T J)^-1 (sum_e g_e g_e^T) (J^T J)^-1`` (``g_e = J_e^T r_e``), which does not believe
-that the points along one edge err independently, plus in quadrature a systematic floor
+that the points along one line err independently, plus in quadrature a systematic floor
 ``eps^2 N [(J^T J)^-1]_kk`` with ``eps = SYSTEMATIC_FRACTION s`` (N points, s their RMS
 residual): the largest move a straightness error of ``eps`` px RMS can fake, aligned with the
 parameter's own signature. So a move counts only when it straightens the edges by more than
@@ -36,9 +38,16 @@ tolerances), not a confident value: a parameter whose sigma exceeds its toleranc
 reported at the description's value with that sigma, and the others are refitted with it
 held there.
 
+Straightness: the edges and the short straight pieces are grouped into whole scene lines
+(:mod:`~mechdeconv_ros.imaging.scene_lines`), and the RMS and largest distance of their
+points from their whole lines are read, px of the corrected image.
+
 Verdict: ``not_enough_edges`` under ``MIN_EDGES`` edges or ``MIN_COVERAGE`` of the field (no
-estimate is made); else ``description_off`` when the RMS straightness with the description
-exceeds ``check.max_rms_px``, else ``ok``.
+estimate is made); else ``description_off`` when any of: (1) the RMS straightness with the
+description exceeds ``check.max_rms_px``; (2) the estimate straightens: its RMS is below the
+description's over ``OFF_RATIO`` and the bend it removes, ``sqrt(before^2 - after^2)``,
+exceeds ``OFF_MIN_PX``; (3) an estimate differs from the description by more than
+``OFF_SIGMAS`` sigma and one tolerance; else ``ok``.
 """
 
 from __future__ import annotations
@@ -48,9 +57,11 @@ import math
 from typing import Any, Mapping
 
 from mechdeconv_ros.imaging.plumb_lines import (
-    ChiefLines, edge_index, field_coverage, great_circles, MIN_EDGE_POINTS, output_focal_px,
-    straight_edges, straightness_px)
-from mechdeconv_ros.imaging.straight_edges import detect_chains, Points, sample_map
+    ChiefLines, edge_index, field_coverage, great_circles, line_pieces, MAX_POINTS_PER_EDGE,
+    MIN_EDGE_POINTS, output_focal_px, straightness_px, thin)
+from mechdeconv_ros.imaging.scene_lines import group_lines
+from mechdeconv_ros.imaging.straight_edges import (
+    detect_chains, frame_of, Points, sample_map, tagged)
 from mechdeconv_ros.optics.prescription import vertex_z
 import numpy as np
 import numpy.typing as npt
@@ -81,8 +92,13 @@ SYSTEMATIC_FRACTION = 0.03
 #: The verdict is also ``description_off`` when an estimate differs from the description by
 #: more than OFF_SIGMAS of its sigma and one tolerance.
 OFF_SIGMAS = 3.0
-#: ... or when the estimate straightens the edges by more than this factor (RMS).
+#: ... or when the estimate straightens the edges by more than this factor (RMS) and removes
+#: a bend of more than OFF_MIN_PX (in quadrature: sqrt(before^2 - after^2)).
 OFF_RATIO = 1.2
+OFF_MIN_PX = 0.05
+#: At most this many points of the straight edges enter the estimate (each edge thinned
+#: evenly to its share, between MIN_EDGE_POINTS and MAX_POINTS_PER_EDGE).
+MAX_FIT_POINTS = 6000
 #: Levenberg-Marquardt iterations.
 LM_ITERATIONS = 20
 VERDICTS = ('ok', 'description_off', 'not_enough_edges')
@@ -95,6 +111,7 @@ class CheckResult:
     straightness_rms_px: float | None = None
     straightness_max_px: float | None = None
     edges: int = 0
+    lines: int = 0
     field_coverage: float = 0.0
     estimate: dict[str, dict[str, float]] = field(default_factory=dict)
     straightness_rms_px_after: float | None = None
@@ -107,7 +124,7 @@ class CheckResult:
         """Return the result as JSON-ready values."""
         return {'straightness_rms_px': self.straightness_rms_px,
                 'straightness_max_px': self.straightness_max_px,
-                'edges': self.edges, 'field_coverage': self.field_coverage,
+                'edges': self.edges, 'lines': self.lines, 'field_coverage': self.field_coverage,
                 'estimate': self.estimate,
                 'straightness_rms_px_after': self.straightness_rms_px_after,
                 'straightness_max_px_after': self.straightness_max_px_after,
@@ -159,7 +176,7 @@ def chains_from_corrected(image: np.ndarray, map_x: np.ndarray, map_y: np.ndarra
     :param image: the corrected frame.
     :param map_x: the remap's float map of raw x per corrected pixel.
     :param map_y: the same for raw y.
-    :return: raw chains (NaN-free).
+    :return: raw chains (NaN-free), tagged with their frame.
     """
     valid = (map_x >= 0) & (map_y >= 0)
     out = []
@@ -167,7 +184,7 @@ def chains_from_corrected(image: np.ndarray, map_x: np.ndarray, map_y: np.ndarra
         raw = sample_map(map_x, map_y, chain)
         raw = raw[np.all(np.isfinite(raw), axis=1)]
         if raw.shape[0] >= 8:
-            out.append(raw)
+            out.append(tagged(raw, frame_of(chain)))
     return out
 
 
@@ -175,12 +192,13 @@ class _Problem:
     """The straight edges' residuals (raw px) as a function of the free pose components."""
 
     def __init__(self, lines: ChiefLines, edges: list[Points], pose0: npt.NDArray[np.float64],
-                 free: npt.NDArray[np.int64]):
+                 free: npt.NDArray[np.int64], ids: npt.NDArray[np.int64] | None = None):
         self.lines, self.pose0, self.free = lines, pose0, free
-        self.set_edges(edges)
+        self.set_edges(edges, np.arange(len(edges)) if ids is None else ids)
 
-    def set_edges(self, edges: list[Points]) -> None:
+    def set_edges(self, edges: list[Points], ids: npt.NDArray[np.int64]) -> None:
         self.edges = edges
+        self.ids = ids      # each edge's number among the description's straight edges
         self.points = np.concatenate(edges) if edges else np.zeros((0, 2))
         self.index = edge_index(edges)
         self.count = len(edges)
@@ -239,10 +257,10 @@ class _Problem:
         edges = [p[k] for p, k in zip(np.split(self.points, np.cumsum(
             np.bincount(self.index, minlength=self.count))[:-1]),
             np.split(keep, np.cumsum(np.bincount(self.index, minlength=self.count))[:-1]))]
-        edges = [e for e in edges if e.shape[0] >= MIN_EDGE_POINTS]
-        if len(edges) < MIN_EDGES:
+        kept = [k for k, e in enumerate(edges) if e.shape[0] >= MIN_EDGE_POINTS]
+        if len(kept) < MIN_EDGES:
             return False
-        self.set_edges(edges)
+        self.set_edges([edges[k] for k in kept], self.ids[kept])
         return True
 
     def jacobian(self, x: npt.NDArray[np.float64], r: npt.NDArray[np.float64],
@@ -308,6 +326,13 @@ def _sigma(problem: _Problem, x: npt.NDArray[np.float64],
     return np.minimum(np.sqrt(var), SIGMA_CAP) * scale
 
 
+def _fit_points(pieces: list[Points]) -> list[Points]:
+    """Thin the edges to at most MAX_FIT_POINTS in all (the fit's time grows with them)."""
+    per_edge = min(MAX_POINTS_PER_EDGE,
+                   max(MIN_EDGE_POINTS, MAX_FIT_POINTS // max(len(pieces), 1)))
+    return [thin(piece, per_edge) for piece in pieces]
+
+
 def check_chains(model: Any, chains: list[Points], max_rms_px: float,
                  estimate: bool = True) -> CheckResult:
     """
@@ -321,12 +346,15 @@ def check_chains(model: Any, chains: list[Points], max_rms_px: float,
     """
     lines = ChiefLines.from_model(model)
     pose0 = nominal_pose(model)
-    edges = straight_edges(chains, lines, pose0, output_focal_px(model))
+    # The fit and the straightness are of whole scene lines, grouped once under the
+    # description (the membership does not change with the pose): each point's residual is
+    # from its whole line's great circle.
+    fits, full, per_line = _scene_lines(model, lines, chains, pose0)
     result = CheckResult()
     tol = tolerances(model)
     free = np.flatnonzero(tol > 0.0) if estimate else np.zeros(0, dtype=np.int64)
-    problem = _Problem(lines, edges, pose0, free)
-    enough = problem.count >= MIN_EDGES
+    problem = _Problem(lines, fits, pose0, free)
+    enough = int(per_line.sum()) >= MIN_EDGES
     x = pose0[free]
     if enough and free.size:
         scale = tol[free]
@@ -343,15 +371,18 @@ def check_chains(model: Any, chains: list[Points], max_rms_px: float,
             x = _levenberg_marquardt(problem, x, lo, hi, scale)
     elif enough:
         problem.keep_straight(x)
-    result.edges = problem.count
+    result.edges = int(per_line[problem.ids].sum()) if problem.count else 0
+    result.lines = problem.count
     result.points = int(problem.points.shape[0])
-    result.rejected_edges = len(edges) - problem.count
+    result.rejected_edges = int(per_line.sum()) - result.edges
     result.field_coverage = field_coverage(lines, pose0, problem.points)
     if problem.count == 0:
         return result
-    rms, worst, _ = _straightness(model, lines, problem, pose0)
+    # The straightness: every point of the kept lines (their edges and short pieces).
+    whole = _WholeLines(model, lines, [full[k] for k in problem.ids])
+    rms, worst = whole.straightness(pose0)
     result.straightness_rms_px, result.straightness_max_px = rms, worst
-    if problem.count < MIN_EDGES or result.field_coverage < MIN_COVERAGE:
+    if result.edges < MIN_EDGES or result.field_coverage < MIN_COVERAGE:
         return result
     result.verdict = 'description_off' if not rms <= max_rms_px else 'ok'
     if free.size == 0:
@@ -369,20 +400,42 @@ def check_chains(model: Any, chains: list[Points], max_rms_px: float,
         x[seen] = xs
         sigma = full_sigma.copy()
         sigma[seen] = _sigma(reduced, xs, tol[free[seen]])
-    pose = problem.pose(x)
+    _judge(result, model, problem.pose(x), free, sigma, tol, whole)
+    return result
+
+
+def _judge(result: CheckResult, model: Any, pose: npt.NDArray[np.float64],
+           free: npt.NDArray[np.int64], sigma: npt.NDArray[np.float64],
+           tol: npt.NDArray[np.float64], whole: _WholeLines) -> None:
+    """Fill in the estimate and the straightness after it; apply the rules (2) and (3)."""
     base_d = image_distance_base(model)
     for j, k in enumerate(free):
         name = ESTIMATED[k][0]
         value = float(pose[k]) if k < 4 else base_d + float(pose[4])
         result.estimate[name] = {'value': value, 'sigma': float(sigma[j]),
                                  'tolerance': float(tol[k])}
-    after = _straightness(model, lines, problem, pose)
+    after = whole.straightness(pose)
     result.straightness_rms_px_after, result.straightness_max_px_after = after[0], after[1]
     moved = [abs(est['value'] - base) > max(OFF_SIGMAS * est['sigma'], est['tolerance'])
              for est, base in zip(result.estimate.values(), _bases(model, free, base_d))]
-    if after[0] * OFF_RATIO < rms or any(moved):
+    if straightens(result.straightness_rms_px, after[0]) or any(moved):
         result.verdict = 'description_off'
-    return result
+
+
+def straightens(before: float, after: float) -> bool:
+    """
+    Return True when an estimate straightens the edges enough to call the description off.
+
+    Both: the RMS drops by more than ``OFF_RATIO`` and the bend it removes (in quadrature,
+    ``sqrt(before^2 - after^2)``) exceeds ``OFF_MIN_PX``: on edges at a 0.03 px floor a
+    0.005 px gain is a ratio of 1.2 and no bend anyone could see.
+
+    :param before: the straightness RMS with the description, px.
+    :param after: the same with the estimate, px.
+    :return: the rule's answer.
+    """
+    removed = math.sqrt(max(before * before - after * after, 0.0))
+    return after * OFF_RATIO < before and removed > OFF_MIN_PX
 
 
 def _bases(model: Any, free: npt.NDArray[np.int64], base_d: float) -> list[float]:
@@ -391,12 +444,49 @@ def _bases(model: Any, free: npt.NDArray[np.int64], base_d: float) -> list[float
     return [float(pose0[k]) if k < 4 else base_d for k in free]
 
 
-def _straightness(model: Any, lines: ChiefLines, problem: _Problem,
-                  pose: npt.NDArray[np.float64]) -> tuple[float, float, Points]:
-    """Return the straightness of the problem's edges under a pose."""
-    dirs = lines.directions(problem.points, pose)
-    good = np.all(np.isfinite(dirs), axis=1)
-    return straightness_px(model, dirs[good], problem.index[good], problem.count)
+class _WholeLines:
+    """The points of whole scene lines (their straight edges and short pieces), one label each."""
+
+    def __init__(self, model: Any, lines: ChiefLines, parts: list[Points]):
+        self.model, self.lines = model, lines
+        self.points = np.concatenate(parts) if parts else np.zeros((0, 2))
+        self.line = np.repeat(np.arange(len(parts)), [p.shape[0] for p in parts])
+        self.count = len(parts)
+
+    def straightness(self, pose: npt.NDArray[np.float64]) -> tuple[float, float]:
+        """Return the RMS and largest distance from the whole lines under a pose, px."""
+        dirs = self.lines.directions(self.points, pose)
+        good = np.all(np.isfinite(dirs), axis=1)
+        rms, worst, _ = straightness_px(self.model, dirs[good], self.line[good], self.count)
+        return rms, worst
+
+
+def _scene_lines(model: Any, lines: ChiefLines, chains: list[Points],
+                 pose0: npt.NDArray[np.float64]
+                 ) -> tuple[list[Points], list[Points], npt.NDArray[np.int64]]:
+    """
+    Return each scene line's fit points, all its points, and its count of straight edges.
+
+    :param model: the description.
+    :param lines: its inverse.
+    :param chains: raw chains.
+    :param pose0: the description's pose (the pieces and lines are made under it).
+    :return: ``(fit points per line (edges thinned), all points per line (edges and short
+        pieces), edges per line)``.
+    """
+    f_px = output_focal_px(model)
+    pieces, short = line_pieces(chains, lines, pose0, f_px)
+    if not pieces:
+        return [], [], np.zeros(0, dtype=np.int64)
+    on_edges, on_short = group_lines(pieces, lines, pose0, f_px, short)
+    fit = _fit_points(pieces)
+    count = int(on_edges.max()) + 1
+    members = [np.flatnonzero(on_edges == k) for k in range(count)]
+    fits = [np.concatenate([fit[j] for j in m]) for m in members]
+    full = [np.concatenate([pieces[j] for j in m]
+                           + [short[j] for j in np.flatnonzero(on_short == k)])
+            for k, m in enumerate(members)]
+    return fits, full, np.bincount(on_edges, minlength=count)
 
 
 def check_images(model: Any, images: list[np.ndarray], max_rms_px: float,

@@ -45,6 +45,9 @@ SPLIT_PX = 1.5
 SPLIT_FRACTION = 0.006
 #: Shortest straight edge kept, px (its chord at the output focal length).
 MIN_EDGE_PX = 48.0
+#: Shortest piece kept as part of a longer line (px, its chord): between crossings near the
+#: periphery a line's pieces are short, and its bend is largest there.
+MIN_PIECE_PX = 12.0
 #: Fewest raw points of a straight edge.
 MIN_EDGE_POINTS = 24
 #: At most this many points per edge enter the fits (evenly spaced along the edge).
@@ -131,53 +134,78 @@ def great_circles(dirs: Points, index: npt.NDArray[np.int64], count: int
     return normals, np.einsum('ij,ij->i', normals[index], dirs)
 
 
-def _cut(dirs: Points, tol_px: float, f_px: float, out: list[tuple[int, int]],
+def _cut(dirs: Points, tol_px: float, f_px: float, out: list[tuple[int, int, bool]],
          start: int) -> None:
-    """Cut an ordered run of directions into great-circle pieces (recursive)."""
+    """Cut an ordered run of directions into great-circle pieces (recursive; long or not)."""
     n = dirs.shape[0]
     if n < 8:
         return
     chord = math.acos(float(np.clip(dirs[0] @ dirs[-1], -1.0, 1.0))) * f_px
-    if chord < MIN_EDGE_PX:
+    if chord < MIN_PIECE_PX:
         return
     _, res = great_circles(dirs, np.zeros(n, dtype=np.int64), 1)
     worst = int(np.argmax(np.abs(res)))
     if abs(res[worst]) * f_px <= max(tol_px, SPLIT_FRACTION * chord):
-        out.append((start, start + n))
+        out.append((start, start + n, chord >= MIN_EDGE_PX))
         return
     cut = worst if n // 8 < worst < n - n // 8 else n // 2
     _cut(dirs[:cut], tol_px, f_px, out, start)
     _cut(dirs[cut:], tol_px, f_px, out, start + cut)
 
 
-def straight_edges(chains: list[Points], lines: ChiefLines, pose: npt.NDArray[np.float64],
-                   f_px: float) -> list[Points]:
+def line_pieces(chains: list[Points], lines: ChiefLines, pose: npt.NDArray[np.float64],
+                f_px: float) -> tuple[list[Points], list[Points]]:
     """
-    Return the pieces of raw chains that are straight in the scene under a pose.
+    Return the pieces of raw chains that are straight in the scene under a pose, all points.
 
     :param chains: ordered raw chains (:func:`~mechdeconv_ros.imaging.straight_edges.
         detect_chains`).
     :param lines: the inverse.
     :param pose: the pose the pieces are judged with (the description's).
     :param f_px: output focal length, px per rad.
-    :return: raw point arrays, each thinned to at most ``MAX_POINTS_PER_EDGE`` points.
+    :return: ``(edges, short)``: the straight edges (chord at least ``MIN_EDGE_PX``, at least
+        ``MIN_EDGE_POINTS`` points) and the shorter straight pieces (chord at least
+        ``MIN_PIECE_PX``), raw points in chain order; a short piece only counts as part of a
+        line that has an edge (:mod:`~mechdeconv_ros.imaging.scene_lines`).
     """
-    edges = []
-    for chain in chains:
-        dirs = lines.directions(chain, pose)
+    edges, short = [], []
+    if not chains:
+        return edges, short
+    # One inverse for all the chains (its tables' derivatives are made per call).
+    every = lines.directions(np.concatenate([np.asarray(c) for c in chains]), pose)
+    for chain, dirs in zip(chains, np.split(every, np.cumsum([c.shape[0] for c in chains])[:-1])):
         good = np.all(np.isfinite(dirs), axis=1)
         chain, dirs = chain[good], dirs[good]
-        pieces: list[tuple[int, int]] = []
+        pieces: list[tuple[int, int, bool]] = []
         _cut(dirs, SPLIT_PX, f_px, pieces, 0)
-        for lo, hi in pieces:
-            piece = chain[lo:hi]
-            if piece.shape[0] < MIN_EDGE_POINTS:
-                continue
-            if piece.shape[0] > MAX_POINTS_PER_EDGE:
-                pick = np.linspace(0, piece.shape[0] - 1, MAX_POINTS_PER_EDGE).round()
-                piece = piece[pick.astype(np.int64)]
-            edges.append(piece)
-    return edges
+        for lo, hi, long in pieces:
+            if long and hi - lo >= MIN_EDGE_POINTS:
+                edges.append(chain[lo:hi])
+            else:
+                short.append(chain[lo:hi])
+    return edges, short
+
+
+def thin(piece: Points, count: int = MAX_POINTS_PER_EDGE) -> Points:
+    """Return at most ``count`` points of a piece, evenly spaced along it (ends kept)."""
+    if piece.shape[0] <= count:
+        return piece
+    pick = np.linspace(0, piece.shape[0] - 1, count).round().astype(np.int64)
+    return piece[pick]
+
+
+def straight_edges(chains: list[Points], lines: ChiefLines, pose: npt.NDArray[np.float64],
+                   f_px: float) -> list[Points]:
+    """
+    Return the straight edges of raw chains under a pose, thinned for the fits.
+
+    :param chains: ordered raw chains.
+    :param lines: the inverse.
+    :param pose: the pose the pieces are judged with (the description's).
+    :param f_px: output focal length, px per rad.
+    :return: raw point arrays, each thinned to at most ``MAX_POINTS_PER_EDGE`` points.
+    """
+    return [thin(edge) for edge in line_pieces(chains, lines, pose, f_px)[0]]
 
 
 def output_focal_px(model: Any) -> float:

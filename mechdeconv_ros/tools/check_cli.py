@@ -57,9 +57,11 @@ def format_table(result: CheckResult) -> str:
         return 'n/a' if value is None or not math.isfinite(value) else f'{value:.3f} px'
 
     lines = [f'verdict: {result.verdict}',
-             f'edges: {result.edges} ({result.points} points, {result.rejected_edges} '
-             f'rejected), field coverage {100.0 * result.field_coverage:.0f} %',
-             f'straightness with the description: rms {px(result.straightness_rms_px)}, '
+             f'edges: {result.edges} on {result.lines} scene lines ({result.points} points, '
+             f'{result.rejected_edges} rejected), field coverage '
+             f'{100.0 * result.field_coverage:.0f} %',
+             f'straightness of whole lines with the description: rms '
+             f'{px(result.straightness_rms_px)}, '
              f'max {px(result.straightness_max_px)}']
     if result.estimate:
         lines.append(f'straightness after the estimate: rms '
