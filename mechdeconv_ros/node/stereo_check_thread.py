@@ -13,8 +13,10 @@ waiting for the reply with the lock released. While a check is in the child the 
 stops it for the time it rectifies and publishes a pair (:meth:`StereoCheckThread.hold` and
 :meth:`~StereoCheckThread.release`: SIGSTOP, SIGCONT), so it runs between pairs only. The
 child matches the pair, pools the last
-``stereo_check.window`` pairs and fits the rig. A child that dies is restarted up to
-:data:`MAX_RESTARTS` times.
+``stereo_check.window`` pairs and fits the rig. A child that dies, or is stuck (no request
+taken, or no reply after two minutes of running: ``WorkerStuck``, the plumbing of
+:mod:`~mechdeconv_ros.runtime.child_process` it shares with the straight-edge check), is
+restarted up to :data:`MAX_RESTARTS` times.
 
 The result's keys (the JSON of ``mechdeconv stereo-check``: ``verdict``, ``matches``,
 ``vertical_disparity_rms_px``, ``vertical_disparity_rms_px_after``, ``estimate.<name>.value``
@@ -146,9 +148,11 @@ class StereoCheckThread:
         with self._cond:
             self._stopping = True
             self._cond.notify()
-        self._worker.stop()
+        self._worker.stop()     # at most 1.5 s; the thread's read then ends (EOF)
         if self._thread.is_alive():
             self._thread.join(timeout=10.0)
+        if not self._thread.is_alive():
+            self._worker.close()    # after the join: the thread may still read the pipe
 
     def _run(self) -> None:
         while True:

@@ -5,15 +5,18 @@ The stereo check in a child process at SCHED_IDLE: its loop and the parent's cli
 
 No ROS. The check of one pair (two SIFT detections, matching, the epipolar fit:
 :mod:`~mechdeconv_ros.imaging.stereo_check`) is about a second of CPU at 720p; in the node's
-process it would hold the interpreter lock the frame path needs. The child (``python -c``
-:data:`BOOTSTRAP` ``FD PARENT_PID``, started by :class:`StereoCheckWorker` with
-:class:`subprocess.Popen`, so it inherits no ROS state, only its socket) lowers itself to nice
-19 and the SCHED_IDLE policy (a core only when no thread of the node wants one), runs OpenCV
-on one thread, ignores SIGINT, lives in a session of its own, exits when its socket closes
-and asks Linux to kill it when its parent dies (PR_SET_PDEATHSIG). While the node rectifies
-and publishes a pair it stops the child (:meth:`StereoCheckWorker.pause`, SIGSTOP/SIGCONT:
-two system calls per pair, only while a check is in progress), so the check runs only in the
-time between pairs: SCHED_IDLE alone left it the memory bandwidth and cache the remap needs.
+process it would hold the interpreter lock the frame path needs. The child and the parent's
+end are the straight-edge check's (:mod:`~mechdeconv_ros.runtime.child_process`, issue 36):
+``python -P -c`` :data:`BOOTSTRAP` ``FD PARENT_PID`` (the parent's package, never one in the
+current directory), nice 19 and SCHED_IDLE from the parent at once, OpenCV on one thread,
+SIGINT ignored, a session of its own, exit when its socket closes, PR_SET_PDEATHSIG; the
+parent continues it (SIGCONT) before every send and after every reply, sends without blocking
+past a deadline, raises :class:`WorkerStuck` (a :class:`WorkerGone`) when no reply comes after
+:data:`~mechdeconv_ros.runtime.child_process.REPLY_TIMEOUT_S` of running, and stops it within
+1.5 s. While the node rectifies and publishes a pair it stops the child
+(:meth:`StereoCheckWorker.pause`, SIGSTOP/SIGCONT: two system calls per pair, only while a
+check is in progress), so the check runs only in the time between pairs: SCHED_IDLE alone
+left it the memory bandwidth and cache the remap needs.
 
 Protocol (a :class:`multiprocessing.connection.Connection` on a Unix socket pair, one request
 and one reply at a time): a pickled header ``{'shapes', 'values', 'sizes', 'generation',
@@ -31,35 +34,21 @@ directions again by the current models at each check; a new raw size clears them
 from __future__ import annotations
 
 from collections import deque
-import ctypes
-import os
-from pathlib import Path
-import signal
-import socket
-import subprocess
 import sys
-import threading
 import time
 from typing import Any
 
 import cv2
 from mechdeconv_ros.imaging.stereo_check import check_pairs, match_pixels
 from mechdeconv_ros.model.stereo import build_stereo
+from mechdeconv_ros.runtime.child_process import (  # noqa: F401 - re-exported
+    bootstrap, child_connection, ChildProcess, WorkerGone, WorkerStuck)
 import numpy as np
 
-#: Linux prctl option: the signal a child gets when its parent (thread) dies.
-PR_SET_PDEATHSIG = 1
-#: Seconds the parent waits for the child to exit after SIGTERM before SIGKILL.
-STOP_WAIT_S = 2.0
-#: One thread for numpy's BLAS and OpenMP in the child.
-THREAD_ENV = {'OMP_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1', 'MKL_NUM_THREADS': '1'}
-#: The child's command: SIGINT ignored before anything else is imported.
-BOOTSTRAP = ('import signal, sys; signal.signal(signal.SIGINT, signal.SIG_IGN); '
-             'from mechdeconv_ros.runtime.stereo_check_worker import main; sys.exit(main())')
-
-
-class WorkerGone(RuntimeError):
-    """The stereo check's child process exited or its pipe broke."""
+#: The child's module; its command (:func:`~mechdeconv_ros.runtime.child_process.bootstrap`):
+#: SIGINT ignored before anything else is imported, then :func:`main`.
+MODULE = 'mechdeconv_ros.runtime.stereo_check_worker'
+BOOTSTRAP = bootstrap(MODULE)
 
 
 class PairWindow:
@@ -131,61 +120,22 @@ def serve(conn: Any) -> int:
             return 0
 
 
-class StereoCheckWorker:
+class StereoCheckWorker(ChildProcess):
     """The parent's client of one stereo check child process."""
 
     def __init__(self) -> None:
         """Create the client; no process yet."""
-        self.process: subprocess.Popen | None = None
-        self._conn: Any = None
+        super().__init__(MODULE, 'stereo check process')
         self._generation: int | None = None
-        #: Whether the child is stopped (SIGSTOP) by :meth:`pause`.
-        self.paused = False
-        self._signal_lock = threading.Lock()
-
-    def pause(self, paused: bool) -> None:
-        """
-        Stop (SIGSTOP) or continue (SIGCONT) the child; nothing if it is already so or gone.
-
-        A stopped child uses no CPU, no memory bandwidth and no cache: what its SCHED_IDLE
-        priority alone cannot give the frame path (a 720p SIFT evicts the remap's maps).
-        Safe from any thread.
-
-        :param paused: True to stop it, False to continue it.
-        """
-        with self._signal_lock:
-            process = self.process
-            if process is None or paused == self.paused or process.poll() is not None:
-                self.paused = paused and process is not None and process.poll() is None
-                return
-            try:
-                process.send_signal(signal.SIGSTOP if paused else signal.SIGCONT)
-            except OSError:
-                return
-            self.paused = paused
 
     def start(self) -> None:
-        """Start a fresh child (no models, no window)."""
-        from multiprocessing.connection import Connection
-        parent, child = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
-        env = dict(os.environ)
-        root = str(Path(__file__).resolve().parents[2])
-        env['PYTHONPATH'] = os.pathsep.join(p for p in (root, env.get('PYTHONPATH', '')) if p)
-        env.update(THREAD_ENV)
-        try:
-            # Its own session: SIGINT to the node's process group must not reach it.
-            self.process = subprocess.Popen(
-                [sys.executable, '-c', BOOTSTRAP, str(child.fileno()), str(os.getpid())],
-                pass_fds=(child.fileno(),), env=env, stdin=subprocess.DEVNULL,
-                start_new_session=True)
-        finally:
-            child.close()
-        self._conn = Connection(parent.detach())
+        """Start a fresh child (no models, no window; the pipe of an earlier one closed)."""
+        super().start()
         self._generation = None
 
     def check(self, left: np.ndarray, right: np.ndarray, values: dict[str, Any],
               sizes: tuple[tuple[int, int], tuple[int, int]], generation: int,
-              window: int) -> dict[str, Any]:
+              window: int, **request: Any) -> dict[str, Any]:
         """
         Check one grey raw pair in the child; block (interpreter lock released) for the reply.
 
@@ -195,7 +145,10 @@ class StereoCheckWorker:
         :param sizes: the raw ``(width, height)`` of the left and the right camera.
         :param generation: their generation (values are sent when it changes).
         :param window: pairs to pool.
+        :param request: ``waiting``, ``poll_s``, ``reply_timeout_s``, ``send_timeout_s`` of
+            :meth:`~mechdeconv_ros.runtime.child_process.ChildProcess.request`.
         :return: the reply (module docstring).
+        :raises WorkerStuck: if the send or the reply did not come in time (stop the child).
         :raises WorkerGone: if the child exited or the pipe broke.
         """
         if self.process is None or self.process.poll() is not None:
@@ -205,33 +158,15 @@ class StereoCheckWorker:
                   'generation': generation, 'window': int(window)}
         data = np.concatenate([np.ascontiguousarray(left).reshape(-1),
                                np.ascontiguousarray(right).reshape(-1)])
+        self._generation = generation
         try:
-            self._conn.send(header)
-            self._conn.send_bytes(data)
-            self._generation = generation
-            reply = self._conn.recv()
-        except (EOFError, OSError) as err:
-            raise WorkerGone(f'the stereo check process stopped ({err!r})') from err
+            reply = self.request((header, data), **request)
+        except WorkerGone:
+            self._generation = None     # the child may not have taken them: send them again
+            raise
         if 'error' in reply:
             self._generation = None
         return reply
-
-    def stop(self) -> None:
-        """Stop the child (SIGCONT if paused, SIGTERM, then SIGKILL) and close the pipe."""
-        self.pause(False)
-        with self._signal_lock:
-            process, self.process = self.process, None
-            self.paused = False
-        if process is not None and process.poll() is None:
-            process.terminate()
-            try:
-                process.wait(STOP_WAIT_S)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.wait(STOP_WAIT_S)
-        if self._conn is not None:
-            self._conn.close()
-            self._conn = None
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -241,25 +176,11 @@ def main(argv: list[str] | None = None) -> int:
     :param argv: ``[FD, PARENT_PID]``; default ``sys.argv[1:]``.
     :return: the exit status.
     """
-    from multiprocessing.connection import Connection
-    args = sys.argv[1:] if argv is None else argv
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
-    except (OSError, AttributeError):
-        pass
-    if len(args) > 1 and os.getppid() != int(args[1]):
-        return 0
-    try:
-        os.setpriority(os.PRIO_PROCESS, 0, 19)
-    except (AttributeError, OSError):
-        pass
-    try:
-        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
-    except (AttributeError, OSError):
-        pass
+    conn = child_connection(argv)     # SIGINT ignored, PR_SET_PDEATHSIG, SCHED_IDLE
+    if conn is None:
+        return 0        # the parent died already
     cv2.setNumThreads(1)
-    return serve(Connection(int(args[0])))
+    return serve(conn)
 
 
 if __name__ == '__main__':
