@@ -8,7 +8,8 @@ seconds of Python; in the node's process it held the interpreter lock that the f
 needs (p99 latency 33 -> 46 ms at 1280x960). Here it runs in a child process
 (``python -P -c BOOTSTRAP FD``: :data:`BOOTSTRAP` runs :func:`main` of this module; started by
 :class:`CheckWorker` with :class:`subprocess.Popen`, so it imports nothing of ROS and
-inherits no ROS state, only the socket), which:
+inherits no ROS state, only the socket; the plumbing below is
+:mod:`~mechdeconv_ros.runtime.child_process`, shared with the stereo check), which:
 
 * imports the package the parent runs, never one in its current directory: ``-P`` keeps the
   current directory off ``sys.path`` (``python -c`` puts it first) and ``PYTHONPATH`` starts
