@@ -204,10 +204,18 @@ def test_an_impossible_rig_or_lens_is_refused_naming_it(harness, name, value):
     result = harness.client.set_parameters(Parameter(name, Parameter.Type.DOUBLE, value))[0]
     assert not result.successful
     assert name in result.reason
-    got = harness.pair()
-    assert got is not None
+    # The running pair is the one of the last accepted set (0.2 deg): pairs of it keep coming
+    # (a pair received before that set may still be in the harness's queue on a busy machine:
+    # look at the pairs for a few seconds, and the last one must be of the accepted model).
     now, _ = expected(dict(PAIR, **{'rig.rotation_x_deg': 0.2}))
-    assert_allclose(np.reshape(got['right_info'].r, (3, 3)), now.R2, atol=1e-12)
+    deadline = time.monotonic() + 30.0
+    while True:
+        got = harness.pair()
+        assert got is not None
+        r2 = np.reshape(got['right_info'].r, (3, 3))
+        if np.allclose(r2, now.R2, atol=1e-12) or time.monotonic() > deadline:
+            break
+    assert_allclose(r2, now.R2, atol=1e-12)
     assert harness.client.get_parameters(name)[name] != value
 
 
