@@ -10,13 +10,15 @@ pair and its four CameraInfos (the right P's Tx = -fx' B in metres), unpaired fr
 and never published, a parameter set through /stereo_node/set_parameters rebuilding both maps
 (every pair afterwards is the new model's, none mixes two), refusals naming the parameter
 and leaving the model, then the idle-time check (/diagnostics carries the CLI's keys) and
-``stereo_check.apply`` setting the pitch on the node itself.
+``stereo_check.apply`` setting the pitch on the node itself. A params file that never reaches
+the node in its namespace is refused at start-up with the key to use.
 """
 
 from __future__ import annotations
 
 import array
 import os
+import subprocess
 import sys
 import time
 from typing import Any
@@ -32,7 +34,8 @@ from numpy.testing import assert_allclose, assert_array_equal
 import psutil
 import pytest
 from rclpy.parameter import Parameter
-from ros_helpers import BEST_EFFORT, make_image, next_domain_id, running_node, stamp_of
+from ros_helpers import (
+    BEST_EFFORT, make_image, next_domain_id, ros_env, running_node, stamp_of)
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from stereo_scenes import depth_scene, render_pair
 import yaml
@@ -276,3 +279,21 @@ def test_compressed_input_on_one_side(tmp_path):
         rect_l, rect_r = expected(PAIR)[1].rectify(left, right)
         assert_array_equal(image_to_array(got['left'])[0], rect_l)
         assert_array_equal(image_to_array(got['right'])[0], rect_r)
+
+
+def test_a_params_file_that_misses_the_namespaced_node_is_refused_with_the_fix(tmp_path):
+    """
+    Start in namespace /stereo with a ``stereo_node:``-keyed file: rcl passes it nothing.
+
+    The node must exit 1 naming the parameter and saying how to key the file (the
+    single camera's "feed images" is no remedy for stereo_node).
+    """
+    params = params_file(tmp_path / 'stereo.yaml', PAIR)
+    argv = [sys.executable, '-c', 'from mechdeconv_ros.node.entry import stereo_node; '
+            'stereo_node()', '--ros-args', '-r', '__ns:=/stereo', '--params-file', str(params)]
+    done = subprocess.run(argv, env=ros_env(next_domain_id()), capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 1, done.stdout + done.stderr
+    out = done.stdout + done.stderr
+    assert 'left.sensor.width_px: the sensor size is empty' in out, out
+    assert '"/**/stereo_node:"' in out and 'feed images' not in out, out
