@@ -10,7 +10,8 @@ pair and its four CameraInfos (the right P's Tx = -fx' B in metres), unpaired fr
 and never published, a parameter set through /stereo_node/set_parameters rebuilding both maps
 (every pair afterwards is the new model's, none mixes two), refusals naming the parameter
 and leaving the model, then the idle-time check (/diagnostics carries the CLI's keys) and
-``stereo_check.apply`` setting the pitch on the node itself. A params file that never reaches
+``stereo_check.apply`` setting the pitch on the node itself, and the check turned off
+leaving no stale verdict. A params file that never reaches
 the node in its namespace is refused at start-up with the key to use.
 """
 
@@ -23,7 +24,7 @@ import sys
 import time
 from typing import Any
 
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from mechdeconv_ros.imaging.stereo_remap import StereoRectifier
 from mechdeconv_ros.model.stereo import build_stereo
 from mechdeconv_ros.node.compressed import encode
@@ -244,6 +245,26 @@ def test_the_check_reports_rig_off_and_apply_sets_the_pitch(harness):
     assert 'stereo_check.apply: set' in harness.proc.output()
     ok = harness.diag(lambda v: v.get('verdict') == 'ok', 120.0)
     assert ok is not None
+
+
+def test_check_off_drops_its_result_from_diagnostics(harness):
+    """stereo_check.rate_hz 0 removes the verdict and estimate at once (issue 36 g)."""
+    on = harness.diag(lambda v: 'verdict' in v and v.get('stereo_check_state') == 'on'
+                      and 'stereo_check_age_s' in v, 60.0)
+    assert on is not None, harness.proc.output()[-3000:]
+    assert int(on['stereo_check_model_generation']) >= 0
+    assert harness.client.set_parameters(
+        Parameter('stereo_check.rate_hz', Parameter.Type.DOUBLE, 0.0))[0].successful
+    off = harness.diag(lambda v: v.get('stereo_check_state') == 'off (stereo_check.rate_hz 0)',
+                       30.0)
+    assert off is not None, harness.proc.output()[-3000:]
+    assert not any(k == 'verdict' or k.startswith('estimate.') for k in off), off
+    harness.diagnostics.clear()
+    assert harness.pair() is not None
+    assert harness.client.spin_until(lambda: len(harness.diagnostics) > 1, 10.0)
+    latest = {kv.key: kv.value for kv in harness.diagnostics[-1].status[0].values}
+    status = harness.diagnostics[-1].status[0]
+    assert 'verdict' not in latest and status.level == DiagnosticStatus.OK
 
 
 def test_compressed_input_on_one_side(tmp_path):
