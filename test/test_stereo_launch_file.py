@@ -7,7 +7,8 @@ Its arguments and defaults (the default params file is config/stereo.yaml and lo
 every ``LaunchConfiguration`` it reads is declared and documented, the one Node (the
 ``stereo_node`` console script of setup.py, its name and namespace, the params file and both
 sides' ``image_transport``), and the Fast DDS profile set in the node's scoped group only
-when ``use_fastdds_profile`` is true. A broken copy is rejected.
+when ``use_fastdds_profile`` is true. A broken copy is rejected. The default params file is
+keyed so rcl hands it to the node in any namespace, and the CLI reads every such key.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from mechdeconv_ros.schema.params import IMAGE_TRANSPORTS
 from mechdeconv_ros.schema.stereo_params import load_stereo_params_file
 import pytest
 from test_launch_file import _calls, _config_name, _kw
+import yaml
 
 REPO = Path(__file__).resolve().parents[1]
 LAUNCH = REPO / 'launch' / 'stereo.launch.py'
@@ -75,3 +77,23 @@ def test_the_check_rejects_a_broken_stereo_launch_file(old: str, new: str) -> No
     assert old in text
     with pytest.raises(AssertionError):
         check_stereo_launch_file(text.replace(old, new))
+
+
+def test_the_default_params_file_reaches_the_node_in_any_namespace() -> None:
+    """
+    Key config/stereo.yaml so that rcl hands it to stereo_node in every namespace.
+
+    rcl gives a params-file section to a node when its key is ``/**``, ``/**/<name>`` or the
+    node's full name; a bare ``stereo_node:`` is ``/stereo_node`` and is silently ignored by
+    the node in ``namespace:=stereo`` (which then fails on its empty sensor size).
+    """
+    document = yaml.safe_load(REPO.joinpath('config', 'stereo.yaml').read_text())
+    assert set(document) <= {'/**', '/**/stereo_node'}, sorted(document)
+
+
+@pytest.mark.parametrize('key', ['/**/stereo_node', 'stereo_node', '/stereo_node', '/**'],
+                         ids=['any-namespace', 'bare', 'root', 'wildcard'])
+def test_every_key_rcl_gives_the_node_is_read_by_the_cli(key: str, tmp_path: Path) -> None:
+    path = tmp_path / 'stereo.yaml'
+    path.write_text(yaml.safe_dump({key: {'ros__parameters': {'rig': {'baseline_mm': 75.0}}}}))
+    assert load_stereo_params_file(path)['rig.baseline_mm'] == 75.0

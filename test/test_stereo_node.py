@@ -10,18 +10,21 @@ pair and its four CameraInfos (the right P's Tx = -fx' B in metres), unpaired fr
 and never published, a parameter set through /stereo_node/set_parameters rebuilding both maps
 (every pair afterwards is the new model's, none mixes two), refusals naming the parameter
 and leaving the model, then the idle-time check (/diagnostics carries the CLI's keys) and
-``stereo_check.apply`` setting the pitch on the node itself.
+``stereo_check.apply`` setting the pitch on the node itself, and the check turned off
+leaving no stale verdict. A params file that never reaches
+the node in its namespace is refused at start-up with the key to use.
 """
 
 from __future__ import annotations
 
 import array
 import os
+import subprocess
 import sys
 import time
 from typing import Any
 
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from mechdeconv_ros.imaging.stereo_remap import StereoRectifier
 from mechdeconv_ros.model.stereo import build_stereo
 from mechdeconv_ros.node.compressed import encode
@@ -32,7 +35,8 @@ from numpy.testing import assert_allclose, assert_array_equal
 import psutil
 import pytest
 from rclpy.parameter import Parameter
-from ros_helpers import BEST_EFFORT, make_image, next_domain_id, running_node, stamp_of
+from ros_helpers import (
+    BEST_EFFORT, make_image, next_domain_id, ros_env, running_node, stamp_of)
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from stereo_scenes import depth_scene, render_pair
 import yaml
@@ -251,6 +255,26 @@ def test_the_check_reports_rig_off_and_apply_sets_the_pitch(harness):
     assert ok is not None
 
 
+def test_check_off_drops_its_result_from_diagnostics(harness):
+    """stereo_check.rate_hz 0 removes the verdict and estimate at once (issue 36 g)."""
+    on = harness.diag(lambda v: 'verdict' in v and v.get('stereo_check_state') == 'on'
+                      and 'stereo_check_age_s' in v, 60.0)
+    assert on is not None, harness.proc.output()[-3000:]
+    assert int(on['stereo_check_model_generation']) >= 0
+    assert harness.client.set_parameters(
+        Parameter('stereo_check.rate_hz', Parameter.Type.DOUBLE, 0.0))[0].successful
+    off = harness.diag(lambda v: v.get('stereo_check_state') == 'off (stereo_check.rate_hz 0)',
+                       30.0)
+    assert off is not None, harness.proc.output()[-3000:]
+    assert not any(k == 'verdict' or k.startswith('estimate.') for k in off), off
+    harness.diagnostics.clear()
+    assert harness.pair() is not None
+    assert harness.client.spin_until(lambda: len(harness.diagnostics) > 1, 10.0)
+    latest = {kv.key: kv.value for kv in harness.diagnostics[-1].status[0].values}
+    status = harness.diagnostics[-1].status[0]
+    assert 'verdict' not in latest and status.level == DiagnosticStatus.OK
+
+
 def test_compressed_input_on_one_side(tmp_path):
     """With left.image_transport compressed a left PNG gives the same rectified pair."""
     left, right, _ = render_pair(PAIR, {}, depth_scene(2), SIZE)
@@ -284,3 +308,21 @@ def test_compressed_input_on_one_side(tmp_path):
         rect_l, rect_r = expected(PAIR)[1].rectify(left, right)
         assert_array_equal(image_to_array(got['left'])[0], rect_l)
         assert_array_equal(image_to_array(got['right'])[0], rect_r)
+
+
+def test_a_params_file_that_misses_the_namespaced_node_is_refused_with_the_fix(tmp_path):
+    """
+    Start in namespace /stereo with a ``stereo_node:``-keyed file: rcl passes it nothing.
+
+    The node must exit 1 naming the parameter and saying how to key the file (the
+    single camera's "feed images" is no remedy for stereo_node).
+    """
+    params = params_file(tmp_path / 'stereo.yaml', PAIR)
+    argv = [sys.executable, '-c', 'from mechdeconv_ros.node.entry import stereo_node; '
+            'stereo_node()', '--ros-args', '-r', '__ns:=/stereo', '--params-file', str(params)]
+    done = subprocess.run(argv, env=ros_env(next_domain_id()), capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 1, done.stdout + done.stderr
+    out = done.stdout + done.stderr
+    assert 'left.sensor.width_px: the sensor size is empty' in out, out
+    assert '"/**/stereo_node:"' in out and 'feed images' not in out, out

@@ -21,8 +21,10 @@ restarted up to :data:`MAX_RESTARTS` times.
 The result's keys (the JSON of ``mechdeconv stereo-check``: ``verdict``, ``matches``,
 ``vertical_disparity_rms_px``, ``vertical_disparity_rms_px_after``, ``estimate.<name>.value``
 / ``.sigma`` / ``.tolerance``) and ``stereo_checks``, ``stereo_check_pairs``,
-``stereo_check_ms_last``, ``stereo_check_applied`` go to /diagnostics (one dict rebound
-whole).
+``stereo_check_ms_last``, ``stereo_check_applied``, ``stereo_check_state``,
+``stereo_check_model_generation`` (the pair the result judged) and its age go to /diagnostics
+(one dict rebound whole). With ``stereo_check.rate_hz`` 0, or after the child gave up, the
+result is dropped and ``stereo_check_state`` says why.
 
 ``stereo_check.apply``: with the verdict ``rig_off``, the measured parameters (sigma within
 the tolerance), each within the tolerance about the USER's value
@@ -40,12 +42,15 @@ import time
 from typing import Any, Callable
 
 from mechdeconv_ros.imaging.stereo_check import apply_values, StereoCheckResult, to_grey
+from mechdeconv_ros.node.stereo_io import CHECK_DONE_KEY
 from mechdeconv_ros.runtime.stereo_check_worker import StereoCheckWorker, WorkerGone
 from mechdeconv_ros.schema.stereo_params import RIG_PARAMS
 from rclpy.parameter import Parameter
 
 #: Restarts of a dead child before the check stays off.
 MAX_RESTARTS = 3
+#: ``stereo_check_state`` while ``stereo_check.rate_hz`` is 0.
+OFF_BY_RATE = 'off (stereo_check.rate_hz 0)'
 #: The rig's values and tolerances the check reads.
 RIG_NAMES = (*RIG_PARAMS, *(f'rig.tolerance.{n[len("rig."):]}' for n in RIG_PARAMS))
 
@@ -91,6 +96,7 @@ class StereoCheckThread:
         self._applying = False
         self.user: dict[str, Any] = {k: value(k) for k in RIG_NAMES}
         self._rate = float(value('stereo_check.rate_hz'))
+        self._publish(self._state_entries('on' if self._rate > 0.0 else OFF_BY_RATE))
         self._apply_trigger = node.create_guard_condition(self._apply_now)
         self._thread = threading.Thread(target=self._run, name='mechdeconv-stereo-check',
                                         daemon=True)
@@ -131,8 +137,25 @@ class StereoCheckThread:
             self._worker.pause(False)
 
     def settings_changed(self) -> None:
-        """Read ``stereo_check.rate_hz`` again (executor thread, after a set)."""
-        self._rate = float(self._value('stereo_check.rate_hz'))
+        """
+        Read ``stereo_check.rate_hz`` again (executor thread, after a set).
+
+        Off (0) drops the last result from /diagnostics at once (a verdict the node no longer
+        refreshes is not shown as current) and any pair waiting for the thread.
+        """
+        with self._cond:
+            was = self._rate
+            self._rate = float(self._value('stereo_check.rate_hz'))
+            if self._rate <= 0.0:
+                self._pending = None
+                self._publish(self._state_entries(OFF_BY_RATE))
+            elif was <= 0.0:
+                self._publish(self._state_entries('on'))
+
+    def _state_entries(self, state: str) -> dict[str, Any]:
+        """Return the /diagnostics entries of a check without a current result."""
+        return {'stereo_check_state': state, 'stereo_checks': self.checks,
+                'stereo_check_applied': self.applied}
 
     def user_set(self, changes: dict[str, Any]) -> None:
         """
@@ -184,7 +207,10 @@ class StereoCheckThread:
             self._worker.stop()
             self._restarts += 1
             if self._restarts > MAX_RESTARTS:
-                self._rate = 0.0
+                with self._cond:
+                    self._rate = 0.0
+                    self._publish(self._state_entries(
+                        f'off: its process died {self._restarts} times'))
             self._node.get_logger().error(f'stereo check: {err}; restarts {self._restarts}')
             return
         finally:
@@ -196,10 +222,16 @@ class StereoCheckThread:
             return
         self.checks += 1
         entries = diagnostics_entries(reply['result'])
-        entries.update({'stereo_checks': self.checks, 'stereo_check_pairs': reply['pairs'],
+        entries.update({'stereo_check_state': 'on', 'stereo_checks': self.checks,
+                        'stereo_check_pairs': reply['pairs'],
                         'stereo_check_ms_last': (time.perf_counter() - start) * 1e3,
-                        'stereo_check_applied': self.applied})
-        self._publish(entries)
+                        'stereo_check_applied': self.applied,
+                        'stereo_check_model_generation': active.generation,
+                        CHECK_DONE_KEY: time.monotonic()})
+        with self._cond:
+            if self._rate <= 0.0:       # turned off while this check ran: not shown, not applied
+                return
+            self._publish(entries)
         result = StereoCheckResult(**reply['result'])
         if result.verdict == 'rig_off' and bool(self._value('stereo_check.apply')):
             changes = apply_values(result, self.user)

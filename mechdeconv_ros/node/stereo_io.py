@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 from typing import Any, Callable, Mapping
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -32,6 +33,9 @@ from rclpy.node import Node
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
+#: The stereo check's entry holding when its result was made (time.monotonic): /diagnostics
+#: shows ``stereo_check_age_s`` instead.
+CHECK_DONE_KEY = 'stereo_check_done_monotonic'
 #: The four CameraInfo outputs: key of :func:`stereo_camera_infos` -> topic.
 INFO_TOPICS = {'left': 'left/camera_info', 'right': 'right/camera_info',
                'left_rect': 'left/camera_info_rect', 'right_rect': 'right/camera_info_rect'}
@@ -133,7 +137,11 @@ def stereo_diagnostics(node: Node, live: StereoStatus, stats: FrameStats, pairer
         'pair_time_ms_max': max_ms, 'pair_time_ms_last': stats.frame_ms_last,
         'last_error': stats.last_error}
     entries.update(stats.extra)
+    check = dict(check)
+    done = check.pop(CHECK_DONE_KEY, None)
     entries.update(check)
+    if done is not None:
+        entries['stereo_check_age_s'] = round(time.monotonic() - float(done), 1)
     status = DiagnosticStatus(name=f'{node.get_fully_qualified_name()}: stereo rectification',
                               hardware_id='')
     if live.rebuild_error:

@@ -81,8 +81,11 @@ class StereoNode(Node):
         self._pairer = StampPairer()
         self._pools = {side: OutputImagePool() for side in SIDES}
         self._demosaicers = {side: Demosaicer() for side in SIDES}
-        self._live = StereoLive(declare_schema(self, STEREO_SCHEMA), info_messages,
-                                log_function(self))
+        values = declare_schema(self, STEREO_SCHEMA)
+        try:
+            self._live = StereoLive(values, info_messages, log_function(self))
+        except ValueError as err:
+            raise empty_size_hint(err) from None
         self._slop_ns = round(float(self._live.value('sync.slop_s')) * 1e9)
         guard_parameter_services(self, lambda: None,
                                  bool(kwargs.get('allow_undeclared_parameters', False)))
@@ -207,6 +210,28 @@ class StereoNode(Node):
             if worker is not None:
                 worker.stop()
         super().destroy_node()
+
+
+def empty_size_hint(err: ValueError) -> ValueError:
+    """
+    Return the start-up refusal, with what to do when it is an empty sensor size.
+
+    The single camera's "feed images" does not apply here: stereo_node builds the pair at
+    start-up and does not follow the images' size. Both sizes 0 is what the node sees when
+    its params file never reached it: rcl gives a ``stereo_node:`` section only to the node
+    in the root namespace (``ros2 launch ... namespace:=x`` then passes nothing, silently).
+
+    :param err: the refusal (a ParameterError names its parameter).
+    :return: ``err``, or a ValueError naming the same parameter with the hint.
+    """
+    parameter = str(getattr(err, 'parameter', ''))
+    if not parameter.endswith('sensor.width_px') or 'is empty' not in str(err):
+        return err
+    return ValueError(
+        f'{parameter}: the sensor size is empty and stereo_node does not follow the images; '
+        'set left.sensor.width_px, left.sensor.height_px and the right ones. If your params '
+        'file sets them, it did not reach this node: key it "/**/stereo_node:" (any '
+        'namespace) or "/**:", not "stereo_node:" (the root namespace only)')
 
 
 def main(args: list[str] | None = None) -> None:

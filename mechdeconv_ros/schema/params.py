@@ -583,8 +583,8 @@ def load_params_file(path: str | Path, node_name: str = 'correct_node') -> dict[
     Read a ROS 2 params file (``/**: ros__parameters:`` or ``<node>: ros__parameters:``).
 
     Nested keys are flattened with dots (``lens: {r1_mm: 4.0}`` -> ``lens.r1_mm``), as
-    rclpy does. Sections for ``/**``, ``node_name`` and ``/node_name`` are merged in that
-    order; others are ignored.
+    rclpy does. Sections for ``/**``, ``/**/node_name``, ``node_name`` and ``/node_name`` are
+    merged in that order; others are ignored.
 
     :param path: the YAML file.
     :param node_name: the node whose section applies besides ``/**``.
@@ -599,7 +599,9 @@ def read_params_file(path: str | Path, node_name: str) -> dict[str, Any]:
     """
     Read a ROS 2 params file's values for one node, flattened but not checked.
 
-    The sections ``/**``, ``node_name`` and ``/node_name`` are merged in that order;
+    The sections ``/**``, ``/**/node_name`` (rcl's key for the node in any namespace, what a
+    file for ``ros2 launch ... namespace:=x`` needs: a bare ``node_name`` key only matches the
+    node in the root namespace), ``node_name`` and ``/node_name`` are merged in that order;
     ``use_sim_time`` and ``qos_overrides.*`` (rclpy's own) are dropped.
 
     :param path: the YAML file.
@@ -617,7 +619,7 @@ def read_params_file(path: str | Path, node_name: str) -> dict[str, Any]:
         raise ValueError(f'{path}: expected a ROS 2 params file ("/**: ros__parameters: ...")')
     merged: dict[str, Any] = {}
     found = False
-    for key in ('/**', node_name, '/' + node_name):
+    for key in ('/**', '/**/' + node_name, node_name, '/' + node_name):
         section = document.get(key)
         if isinstance(section, dict) and isinstance(section.get('ros__parameters'), dict):
             merged.update(flatten(section['ros__parameters']))

@@ -196,7 +196,7 @@ def split_values(values: Mapping[str, Any]
 def load_stereo_params_file(path: str | Path, node_name: str = 'stereo_node'
                             ) -> dict[str, ParamValue]:
     """
-    Read a stereo_node ROS 2 params file (``stereo_node: ros__parameters:`` or ``/**``).
+    Read a stereo_node params file (``/**/stereo_node:``, ``stereo_node:`` or ``/**:``).
 
     :param path: the YAML file.
     :param node_name: the node whose section applies besides ``/**``.

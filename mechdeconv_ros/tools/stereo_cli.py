@@ -5,11 +5,12 @@
 
     mechdeconv stereo --params STEREO.yaml [-p NAME=VALUE ...] LEFT.png RIGHT.png -o DIR
 
-``STEREO.yaml`` is a ROS 2 params file for stereo_node (``stereo_node: ros__parameters:`` or
-``/**``, :mod:`mechdeconv_ros.schema.stereo_params`). Writes ``DIR/left_rect.png``,
-``DIR/right_rect.png`` (the exact rectification, :mod:`mechdeconv_ros.imaging.stereo_remap`)
-and ``DIR/left_camera_info.yaml``, ``DIR/right_camera_info.yaml`` (camera_calibration_parsers
-YAML as ``mechdeconv camera-info`` writes, with the rectifying R and the pair's P:
+``STEREO.yaml`` is a ROS 2 params file for stereo_node (``/**/stereo_node:
+ros__parameters:``, ``stereo_node`` or ``/**``, :mod:`mechdeconv_ros.schema.stereo_params`).
+Writes ``DIR/left_rect.png``, ``DIR/right_rect.png`` (the exact rectification,
+:mod:`mechdeconv_ros.imaging.stereo_remap`) and ``DIR/left_camera_info.yaml``,
+``DIR/right_camera_info.yaml`` (camera_calibration_parsers YAML as ``mechdeconv camera-info``
+writes, with the rectifying R and the pair's P:
 ``P[0, 3] = -f B`` of the right camera, B in metres). Every refusal is a ``ValueError`` whose
 message names the parameter or file; the command line prints it as one line and exits 2.
 """
