@@ -718,7 +718,7 @@ def stereo_tables(doc: Mapping[str, Any]) -> list[str]:
     targets = doc.get('targets') or {}
     remaps = (child.get('bare_two_remaps_ms') or {}).get('median')
     names = {'relay': 'relay of two streams', 'stereo': 'stereo_node',
-             'stereo_check': 'stereo_node, check at 1 Hz'}
+             'stereo_check': f"stereo_node, check at {doc.get('check_rate_hz', 1.0):g} Hz"}
     lines = [f"### stereo_node: 2 x {child.get('size', '?')} rgb8 at "
              f"{doc.get('rate_hz', 30):g} Hz", '',
              f'Two bare remaps (the pair, median): {fmt_ms(remaps)} ms.', '']
@@ -735,7 +735,8 @@ def stereo_tables(doc: Mapping[str, Any]) -> list[str]:
                   f"{fmt_ratio(targets['latency_ratio'])}, "
                   f"{verdict(targets['latency_met'])}."]
     if 'check_pairs_share' in targets:
-        lines += [f"The check at 1 Hz: {fmt_ratio(targets['check_pairs_share'])} x the pairs "
+        lines += [f"The check at {doc.get('check_rate_hz', 1.0):g} Hz: "
+                  f"{fmt_ratio(targets['check_pairs_share'])} x the pairs "
                   f"per second without it, p50 {targets['check_p50_delta_ms']:+.2f} ms."]
     if 'latency_ratio_check' in targets:
         lines += ['With the check on: (node - relay) / two remaps = '
