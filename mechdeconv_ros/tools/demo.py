@@ -206,7 +206,7 @@ def scenario(args: argparse.Namespace, children: list[Child], monitor: Any,
     if 'output.alpha' in change:
         say('  demo_camera keeps its lens (output.alpha is how the node corrects, not the lens)')
     else:
-        result, sent, replied = monitor.set_lens('demo_camera', change, 10.0)
+        result, sent, replied = monitor.set_lens('demo_camera', change, 20.0)
         say(f'  /demo_camera/set_parameters_atomically -> successful={result.successful} '
             f'reason={result.reason!r} ({(replied - sent) * 1e3:.0f} ms: the camera now renders '
             'through the new lens)')
@@ -214,7 +214,7 @@ def scenario(args: argparse.Namespace, children: list[Child], monitor: Any,
             raise DemoError('demo_camera refused the new lens')
     revision_before = int(monitor.diag.get('model_revision', '0'))
     monitor.watch_d()
-    result, sent, replied = monitor.set_lens('correct_node', change, 10.0)
+    result, sent, replied = monitor.set_lens('correct_node', change, 20.0)
     say(f'  /correct_node/set_parameters_atomically -> successful={result.successful} '
         f'reason={result.reason!r} (reply after {(replied - sent) * 1e3:.1f} ms)')
     if not result.successful:
