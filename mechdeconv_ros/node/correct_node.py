@@ -67,7 +67,7 @@ from mechdeconv_ros.node.frame_input import (
 from mechdeconv_ros.node.image_msgs import camera_infos_from_model, Encoding, OutputImagePool
 from mechdeconv_ros.node.lens_follower import LensFollower
 from mechdeconv_ros.node.node_main import log_function, run_node
-from mechdeconv_ros.node.param_services import guard_parameter_services
+from mechdeconv_ros.node.param_services import guard_parameter_services, validation_result
 from mechdeconv_ros.node.ros_params import declare_schema
 from mechdeconv_ros.node.stage_clock import stage_clock_from_env, StageClock
 from mechdeconv_ros.node.topics import create_outputs, LazyInput
@@ -139,12 +139,7 @@ class CorrectNode(Node):
 
     def _on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
         """Validate a set by building the candidate model; never raises."""
-        try:
-            self._live.validate(changes_of(parameters))
-        except Exception as err:        # noqa: B902 - a callback must never raise
-            return SetParametersResult(successful=False, reason=str(err) if isinstance(
-                err, ValueError) else f'internal error while validating: {err!r}')
-        return SetParametersResult(successful=True)
+        return validation_result(self._live.validate, changes_of(parameters))
 
     def _post_set_parameters(self, parameters: list[Parameter]) -> None:
         """Commit an accepted set; a model change is built after the request (one per request)."""

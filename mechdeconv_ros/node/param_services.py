@@ -36,6 +36,25 @@ from rclpy.parameter import Parameter
 PARAMETER_TYPES = frozenset(t.value for t in Parameter.Type)
 
 
+def validation_result(validate: Callable[[dict[str, Any]], Any],
+                      changes: dict[str, Any]) -> SetParametersResult:
+    """
+    Return a set's answer from a validator that raises ValueError naming what it refuses.
+
+    An on-set-parameters callback must never raise: any other exception is an internal error.
+
+    :param validate: builds the candidate model of ``changes`` (raises ValueError to refuse).
+    :param changes: parameter name -> new value.
+    :return: successful, or refused with the validator's reason.
+    """
+    try:
+        validate(changes)
+    except Exception as err:        # noqa: B902 - a callback must never raise
+        return SetParametersResult(successful=False, reason=str(err) if isinstance(
+            err, ValueError) else f'internal error while validating: {err!r}')
+    return SetParametersResult(successful=True)
+
+
 def guard_parameter_services(node: Node, after_request: Callable[[], Any],
                              allow_undeclared: bool = False) -> None:
     """

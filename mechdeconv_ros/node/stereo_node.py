@@ -40,7 +40,7 @@ from mechdeconv_ros.node.diagnostics import FrameStats
 from mechdeconv_ros.node.frame_input import demosaic_frame, FrameRefused
 from mechdeconv_ros.node.image_msgs import OutputImagePool
 from mechdeconv_ros.node.node_main import log_function, run_node
-from mechdeconv_ros.node.param_services import guard_parameter_services
+from mechdeconv_ros.node.param_services import guard_parameter_services, validation_result
 from mechdeconv_ros.node.ros_params import declare_schema
 from mechdeconv_ros.node.stereo_check_thread import StereoCheckThread
 from mechdeconv_ros.node.stereo_io import (
@@ -110,12 +110,7 @@ class StereoNode(Node):
 
     def _on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
         """Validate a set by building the candidate pair; never raises."""
-        try:
-            self._live.validate(changes_of(parameters))
-        except Exception as err:        # noqa: B902 - a callback must never raise
-            return SetParametersResult(successful=False, reason=str(err) if isinstance(
-                err, ValueError) else f'internal error while validating: {err!r}')
-        return SetParametersResult(successful=True)
+        return validation_result(self._live.validate, changes_of(parameters))
 
     def _post_set_parameters(self, parameters: list[Parameter]) -> None:
         """Commit an accepted set (the rebuild thread wakes for a model change)."""
